@@ -1,0 +1,85 @@
+"""The Kuka iiwa from ``pybullet_data`` with a tool welded to its flange.
+
+The tool (the gripper-shaped hand for pick-and-place, the socket wrench for tire removal)
+is a separate body held by a stiff fixed constraint; its frame is the tool-centre point,
+which is also the end-effector object (index 0) of the task. Cartesian commands go
+through :class:`~hsp.sim.ik.KukaIK` and joint position control.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as p
+import pybullet_data
+
+from hsp.geometry import compose, inverse
+from hsp.sim.grasp import Gripper, body_pose
+from hsp.sim.ik import EE_LINK, KUKA_URDF, REST, KukaIK
+
+FLANGE_OFFSET = 0.05
+"""Distance from the link-6 frame to the flange face along its z axis (m)."""
+
+
+class KukaArm:
+    """Kuka iiwa + tool. ``command`` sets joint targets; ``tcp_pose`` reads the tool."""
+
+    def __init__(self, client: int, tool_urdf: str, tool_length: float, max_force: float = 300.0) -> None:
+        self.client = client
+        self.robot = p.loadURDF(pybullet_data.getDataPath() + "/" + KUKA_URDF, useFixedBase=True, physicsClientId=client)
+        self.joints = list(range(7))
+        for j, q in zip(self.joints, REST):
+            p.resetJointState(self.robot, j, float(q), physicsClientId=client)
+        self.T_flange_tcp = np.array([0.0, 0.0, FLANGE_OFFSET + tool_length, 0.0, 1.0, 0.0, 0.0])
+        start = compose(self._flange(), self.T_flange_tcp)
+        self.body = p.loadURDF(tool_urdf, start[:3].tolist(), start[3:].tolist(), physicsClientId=client)
+        # Constraint frames are relative to the link's centre of mass, not its URDF frame.
+        com_pos, com_orn = p.getDynamicsInfo(self.robot, EE_LINK, physicsClientId=client)[3:5]
+        T_com_tcp = compose(inverse(np.array([*com_pos, *com_orn])), self.T_flange_tcp)
+        cid = p.createConstraint(
+            self.robot, EE_LINK, self.body, -1, p.JOINT_FIXED, [0, 0, 0],
+            parentFramePosition=T_com_tcp[:3].tolist(), childFramePosition=[0, 0, 0],
+            parentFrameOrientation=T_com_tcp[3:].tolist(), childFrameOrientation=[0, 0, 0, 1],
+            physicsClientId=client,
+        )
+        p.changeConstraint(cid, maxForce=5000.0, physicsClientId=client)
+        self.max_force = max_force
+        self.ik = KukaIK()
+        self.gripper = Gripper(client, self.body)
+        self.q_target = REST.copy()
+        self._last_command: np.ndarray | None = None
+
+    def _flange(self) -> np.ndarray:
+        return body_pose(self.client, self.robot, EE_LINK)
+
+    def joint_positions(self) -> np.ndarray:
+        return np.array([s[0] for s in p.getJointStates(self.robot, self.joints, physicsClientId=self.client)])
+
+    def tcp_pose(self) -> np.ndarray:
+        return body_pose(self.client, self.body)
+
+    def command(self, T_world_tcp: np.ndarray) -> None:
+        """Joint position targets that put the tool-centre point at ``T_world_tcp (7,)``."""
+        if self._last_command is not None and np.allclose(T_world_tcp, self._last_command, atol=1e-7):
+            return
+        self._last_command = np.array(T_world_tcp, copy=True)
+        T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))
+        self.q_target = self.ik.solve(T_world_flange, self.q_target)
+        p.setJointMotorControlArray(
+            self.robot, self.joints, p.POSITION_CONTROL, targetPositions=self.q_target.tolist(),
+            forces=[self.max_force] * 7, positionGains=[0.3] * 7, velocityGains=[1.0] * 7,
+            physicsClientId=self.client,
+        )
+
+    def reset_to(self, T_world_tcp: np.ndarray) -> None:
+        """Teleport the arm (and tool) so that the TCP is at ``T_world_tcp``; for layouts."""
+        T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))
+        self.q_target = self.ik.solve(T_world_flange, REST)
+        for j, q in zip(self.joints, self.q_target):
+            p.resetJointState(self.robot, j, float(q), physicsClientId=self.client)
+        tcp = compose(self._flange(), self.T_flange_tcp)
+        p.resetBasePositionAndOrientation(self.body, tcp[:3].tolist(), tcp[3:].tolist(), physicsClientId=self.client)
+        self._last_command = None
+        self.command(T_world_tcp)
+
+    def close(self) -> None:
+        self.ik.close()
