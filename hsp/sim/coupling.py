@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pybullet as p
 
-from hsp.geometry import transform_points, yaw_of
+from hsp.geometry import yaw_of
+from hsp.sim.grasp import body_pose
 
 if TYPE_CHECKING:
     from hsp.sim.scene import Scene
@@ -38,16 +39,19 @@ class SocketCoupling:
             s.tolerance,  # type: ignore[union-attr]
         )
 
+    def _point(self, pose: np.ndarray, local: np.ndarray) -> np.ndarray:
+        return np.array(p.multiplyTransforms(pose[:3].tolist(), pose[3:].tolist(), local.tolist(), [0, 0, 0, 1])[0])
+
     def update(self) -> None:
         sc = self.scene
-        poses = sc.object_poses()
-        tip = transform_points(poses[0], self.tool_point)
-        wrench_yaw = float(yaw_of(poses[0, 3:]))
+        wrench = sc.ee.tcp_pose()
+        tip = self._point(wrench, self.tool_point)
+        wrench_yaw = float(yaw_of(wrench[3:]))
         for i in self.bolts:
             body = sc.bodies[i]
-            socket = transform_points(poses[i], self.bolt_point)
-            q = p.getJointState(body, 0, physicsClientId=sc.client)[0]
+            socket = self._point(body_pose(sc.client, body, 0), self.bolt_point)
             if np.linalg.norm(tip - socket) <= self.tolerance:
+                q = p.getJointState(body, 0, physicsClientId=sc.client)[0]
                 yaw0, q0 = self.engaged.setdefault(i, (wrench_yaw, q))
                 turn = np.angle(np.exp(1j * (wrench_yaw - yaw0)))
                 p.setJointMotorControl2(body, 0, p.POSITION_CONTROL, targetPosition=q0 + turn, force=DRIVE_TORQUE,

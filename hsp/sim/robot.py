@@ -18,6 +18,8 @@ from hsp.sim.ik import EE_LINK, KUKA_URDF, REST, KukaIK
 
 FLANGE_OFFSET = 0.05
 """Distance from the link-6 frame to the flange face along its z axis (m)."""
+IK_EVERY = 4
+"""Solve IK on every 4th physics step (60 Hz control at 240 Hz physics)."""
 
 
 class KukaArm:
@@ -47,6 +49,7 @@ class KukaArm:
         self.gripper = Gripper(client, self.body)
         self.q_target = REST.copy()
         self._last_command: np.ndarray | None = None
+        self._calls = 0
 
     def _flange(self) -> np.ndarray:
         return body_pose(self.client, self.robot, EE_LINK)
@@ -59,7 +62,10 @@ class KukaArm:
 
     def command(self, T_world_tcp: np.ndarray) -> None:
         """Joint position targets that put the tool-centre point at ``T_world_tcp (7,)``."""
-        if self._last_command is not None and np.allclose(T_world_tcp, self._last_command, atol=1e-7):
+        self._calls += 1
+        if self._last_command is not None and (
+            self._calls % IK_EVERY or np.allclose(T_world_tcp, self._last_command, atol=1e-7)
+        ):
             return
         self._last_command = np.array(T_world_tcp, copy=True)
         T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))

@@ -1,0 +1,144 @@
+"""The ``hsp`` command: one thin sub-command per pipeline stage.
+
+Each command reads its defaults from ``params.yaml``, calls one library function, writes
+its outputs atomically and a flat-key JSON report, and exits non-zero with a one-line
+reason on bad input.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.logging import RichHandler
+from rich.table import Table
+
+from hsp.config import load_params, param
+from hsp.errors import HspError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
+err = Console(stderr=True)
+log = logging.getLogger("hsp")
+
+PARAMS_OPTION = typer.Option(None, "--params", help="params file (default: ./params.yaml if present)")
+
+
+@app.callback()
+def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="debug logging")) -> None:
+    logging.basicConfig(
+        level=logging.DEBUG if verbose else logging.INFO,
+        format="%(message)s",
+        handlers=[RichHandler(console=err, show_path=False)],
+        force=True,
+    )
+
+
+def _fail(e: Exception) -> None:
+    err.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code=1)
+
+
+@app.command()
+def tasks(pipeline: Optional[Path] = typer.Option(None, help="pipeline directory (tasks/ and objects/)")) -> None:
+    """List the tasks and their objects."""
+    from hsp.tasks.registry import list_tasks, load_task
+
+    try:
+        table = Table("task", "objects (index 0 = end-effector)", "success")
+        for name in list_tasks(pipeline):
+            task = load_task(name, pipeline)
+            objs = ", ".join(f"{o.name} [{o.label}]" for o in task.objects)
+            table.add_row(name, objs, task.spec.success.kind)
+        Console().print(table)
+    except HspError as e:
+        _fail(e)
+
+
+@app.command()
+def record(
+    task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
+    episodes: Optional[int] = typer.Option(None, help="number of demonstrations [params: record.episodes.TASK]"),
+    seed: Optional[int] = typer.Option(None, help="stage seed [params: seed]"),
+    out: Optional[Path] = typer.Option(None, help="output directory [data/recordings/TASK]"),
+    fps: Optional[int] = typer.Option(None, help="frame rate [params: record.fps]"),
+    workers: Optional[int] = typer.Option(None, help="parallel processes [params: record.workers]"),
+    camera: bool = typer.Option(False, "--camera/--no-camera", help="also render RGB-D camera streams"),
+    force: bool = typer.Option(False, "--force", help="replace an existing output directory"),
+    reports: Path = typer.Option(Path("reports"), help="reports directory"),
+    params_file: Optional[Path] = PARAMS_OPTION,
+) -> None:
+    """Run the scripted demonstrator on random layouts; one MCAP per episode."""
+    from hsp.fileio import write_json
+    from hsp.recording.record import RecordConfig
+    from hsp.recording.record import record as record_episodes
+    from hsp.tasks.registry import load_task
+
+    try:
+        if camera:
+            raise HspError("camera streams are not available yet (issue 3); record with --no-camera")
+        params = load_params(params_file)
+        t = load_task(task)
+        cfg = RecordConfig(
+            episodes=episodes if episodes is not None else int(param(params, f"record.episodes.{task}", 40)),
+            seed=seed if seed is not None else int(param(params, "seed", 0)),
+            fps=fps if fps is not None else int(param(params, "record.fps", 15)),
+            workers=workers if workers is not None else int(param(params, "record.workers", 2)),
+        )
+        out_dir = out or Path("data/recordings") / task
+        log.info("record %s: read %s; %d episodes, seed %d, %d fps", task, t.path, cfg.episodes, cfg.seed, cfg.fps)
+        report = record_episodes(t, cfg, out_dir, force=force)
+        report_path = reports / task / "record.json"
+        write_json(report_path, report)
+        log.info("wrote %s and %s in %.1f s", out_dir, report_path, report["seconds"])
+        if report["demonstrator_success_rate"] < 1.0:
+            log.warning("the demonstrator failed on %d of %d episodes", report["demonstrator_failures"], report["episodes"])
+    except HspError as e:
+        _fail(e)
+
+
+def _not_available(stage: str, issue: int) -> None:
+    _fail(HspError(f"`hsp {stage}` is not available yet (issue {issue})"))
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def parse(task: str = typer.Argument(...)) -> None:
+    """Track object poses in recordings and write a LeRobot dataset (not available yet)."""
+    _not_available("parse", 4)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def label(task: str = typer.Argument(...)) -> None:
+    """Infer tool, target and way-point per frame with Viterbi (not available yet)."""
+    _not_available("label", 5)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def train(task: str = typer.Argument(...)) -> None:
+    """Train a policy (not available yet)."""
+    _not_available("train", 7)
+
+
+@app.command(name="eval", context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def evaluate(task: str = typer.Argument(...)) -> None:
+    """Evaluate a policy on the simulated Kuka (not available yet)."""
+    _not_available("eval", 8)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def report() -> None:
+    """Write reports/summary.md and plots (not available yet)."""
+    _not_available("report", 9)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def view(task: str = typer.Argument(...)) -> None:
+    """Overlay video, label timeline and Rerun recording of an episode (not available yet)."""
+    _not_available("view", 6)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(app())

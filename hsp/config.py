@@ -1,0 +1,39 @@
+"""``params.yaml``: every knob of the pipeline, flat and literal (the paper's values are
+the defaults). Commands read their section from it; command-line options override."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hsp.errors import HspError
+
+DEFAULT_PARAMS = Path("params.yaml")
+
+
+def load_params(path: Path | None = None) -> dict[str, Any]:
+    """The parsed params file; ``{}`` when the default file is absent."""
+    p = Path(path) if path else DEFAULT_PARAMS
+    if not p.is_file():
+        if path:
+            raise HspError(f"{p}: params file not found")
+        return {}
+    try:
+        data = yaml.safe_load(p.read_text()) or {}
+    except yaml.YAMLError as e:
+        raise HspError(f"{p}: invalid YAML: {str(e).splitlines()[0]}") from None
+    if not isinstance(data, dict):
+        raise HspError(f"{p}: expected a mapping at the top level")
+    return data
+
+
+def param(params: dict[str, Any], key: str, default: Any) -> Any:
+    """Value at a dotted ``key`` (``record.fps``), or ``default`` when absent."""
+    node: Any = params
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return default
+        node = node[part]
+    return node
