@@ -66,30 +66,31 @@ def record(
     out: Optional[Path] = typer.Option(None, help="output directory [data/recordings/TASK]"),
     fps: Optional[int] = typer.Option(None, help="frame rate [params: record.fps]"),
     workers: Optional[int] = typer.Option(None, help="parallel processes [params: record.workers]"),
-    camera: bool = typer.Option(False, "--camera/--no-camera", help="also render RGB-D camera streams"),
+    camera: Optional[bool] = typer.Option(None, "--camera/--no-camera", help="render the RGB-D streams [params: record.camera]"),
     force: bool = typer.Option(False, "--force", help="replace an existing output directory"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
     """Run the scripted demonstrator on random layouts; one MCAP per episode."""
     from hsp.fileio import write_json
-    from hsp.recording.record import RecordConfig
+    from hsp.recording.record import RecordConfig, camera_rig
     from hsp.recording.record import record as record_episodes
     from hsp.tasks.registry import load_task
 
     try:
-        if camera:
-            raise HspError("camera streams are not available yet (issue 3); record with --no-camera")
         params = load_params(params_file)
+        use_camera = camera if camera is not None else bool(param(params, "record.camera", True))
         t = load_task(task)
         cfg = RecordConfig(
             episodes=episodes if episodes is not None else int(param(params, f"record.episodes.{task}", 40)),
             seed=seed if seed is not None else int(param(params, "seed", 0)),
             fps=fps if fps is not None else int(param(params, "record.fps", 15)),
             workers=workers if workers is not None else int(param(params, "record.workers", 2)),
+            rig=camera_rig(params) if use_camera else None,
         )
         out_dir = out or Path("data/recordings") / task
-        log.info("record %s: read %s; %d episodes, seed %d, %d fps", task, t.path, cfg.episodes, cfg.seed, cfg.fps)
+        log.info("record %s: read %s; %d episodes, seed %d, %d fps, camera %s", task, t.path, cfg.episodes, cfg.seed,
+                 cfg.fps, "on" if cfg.rig else "off")
         report = record_episodes(t, cfg, out_dir, force=force)
         report_path = reports / task / "record.json"
         write_json(report_path, report)

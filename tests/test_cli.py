@@ -20,7 +20,8 @@ def test_tasks_lists_the_four_tasks_and_their_objects():
 
 def test_record_writes_recordings_and_report(tmp_path):
     out, reports = tmp_path / "rec", tmp_path / "reports"
-    args = ["record", "stacking-2", "--episodes", "2", "--seed", "4", "--out", str(out), "--reports", str(reports), "--workers", "1"]
+    args = ["record", "stacking-2", "--episodes", "2", "--seed", "4", "--out", str(out), "--reports", str(reports),
+            "--workers", "1", "--no-camera"]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     report = json.loads((reports / "stacking-2" / "record.json").read_text())
@@ -45,6 +46,22 @@ def test_unfinished_stages_say_so(stage):
     assert "not available yet" in result.output
 
 
-def test_camera_recording_is_not_faked(tmp_path):
-    result = runner.invoke(app, ["record", "painting", "--camera", "--out", str(tmp_path / "x")])
-    assert result.exit_code == 1 and "not available yet" in result.output
+def test_camera_settings_come_from_the_params_file(tmp_path):
+    """A tiny camera from --params: the recording holds 80x60 images."""
+    from hsp.recording.reader import read_recording
+
+    params = tmp_path / "params.yaml"
+    params.write_text("seed: 1\nrecord: {fps: 5, camera: true}\ncamera: {width: 80, height: 60, fx: 77.0, fy: 77.0, cx: 40.0, cy: 30.0}\n")
+    out = tmp_path / "rec"
+    result = runner.invoke(app, ["record", "stacking-1", "--episodes", "1", "--out", str(out), "--params", str(params),
+                                 "--reports", str(tmp_path / "reports"), "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    rec = read_recording(out / "episode_000000.mcap")
+    assert rec.rgb.shape[1:] == (60, 80, 3) and rec.K[0, 0] == 77.0
+
+
+def test_unknown_camera_key_is_named(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text("camera: {widht: 80}\n")
+    result = runner.invoke(app, ["record", "stacking-1", "--out", str(tmp_path / "x"), "--params", str(params)])
+    assert result.exit_code == 1 and "camera: unknown keys ['widht']" in result.output

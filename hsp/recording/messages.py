@@ -9,6 +9,15 @@ GROUND_TRUTH_POSES = "/hsp/ground_truth/poses"
 GROUND_TRUTH_SUBTASK = "/hsp/ground_truth/subtask"
 GROUND_TRUTH_PREFIX = "/hsp/ground_truth/"
 
+# realsense-ros >= 4.55 names (before: without the second "camera/").
+CAMERA_NS = "/camera/camera"
+COLOR_IMAGE = f"{CAMERA_NS}/color/image_raw"
+COLOR_INFO = f"{CAMERA_NS}/color/camera_info"
+DEPTH_IMAGE = f"{CAMERA_NS}/aligned_depth_to_color/image_raw"
+DEPTH_INFO = f"{CAMERA_NS}/aligned_depth_to_color/camera_info"
+TF_STATIC = "/tf_static"
+COLOR_FRAME = "camera_color_optical_frame"
+
 _TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
 _HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
 _VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
@@ -28,6 +37,24 @@ def _msgdef(main: str, *deps: str) -> str:
 TF_MESSAGE = (
     "tf2_msgs/msg/TFMessage",
     _msgdef("geometry_msgs/TransformStamped[] transforms\n", _TRANSFORM_STAMPED, _HEADER, _TIME, _TRANSFORM, _VECTOR3, _QUATERNION),
+)
+
+IMAGE = (
+    "sensor_msgs/msg/Image",
+    _msgdef(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n",
+        _HEADER, _TIME,
+    ),
+)
+
+_ROI = "MSG: sensor_msgs/RegionOfInterest\nuint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n"
+CAMERA_INFO = (
+    "sensor_msgs/msg/CameraInfo",
+    _msgdef(
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\nfloat64[9] k\n"
+        "float64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\nsensor_msgs/RegionOfInterest roi\n",
+        _HEADER, _TIME, _ROI,
+    ),
 )
 
 SUBTASK = (

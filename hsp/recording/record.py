@@ -6,16 +6,19 @@ import logging
 import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.progress import Progress
 
 from hsp.errors import HspError
 from hsp.fileio import replace_dir
-from hsp.recording.writer import write_episode
+from hsp.recording.writer import CameraRig, write_episode
+from hsp.sim.camera import CameraConfig
 from hsp.sim.demonstration import demonstrate
+from hsp.sim.depth_noise import DepthNoiseConfig
 from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
@@ -31,6 +34,8 @@ class RecordConfig:
     """Frame rate of the recording (must divide the 240 Hz physics rate)."""
     workers: int = 2
     """Processes recording episodes in parallel."""
+    rig: CameraRig | None = None
+    """Camera and depth-sensor model; ``None`` records the ground-truth topics only."""
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -39,6 +44,19 @@ class RecordConfig:
             raise HspError(f"record.fps = {self.fps}: must divide 240")
         if self.workers < 1:
             raise HspError(f"record.workers = {self.workers}: must be at least 1")
+
+
+def camera_rig(params: dict[str, Any]) -> CameraRig:
+    """Camera and depth-sensor model from the ``camera`` and ``depth_noise`` params sections."""
+    def build(cls: type, section: str) -> Any:
+        values = params.get(section) or {}
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise HspError(f"params.yaml: {section}: unknown keys {unknown} (known: {sorted(known)})")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+    return CameraRig(build(CameraConfig, "camera"), build(DepthNoiseConfig, "depth_noise"))
 
 
 def episode_seed(seed: int, episode: int) -> int:
@@ -50,11 +68,11 @@ def episode_path(out_dir: Path, episode: int) -> Path:
     return out_dir / f"episode_{episode:06d}.mcap"
 
 
-def _record_one(args: tuple[str, Path, int, int, int, Path]) -> tuple[int, bool, int]:
-    task_name, pipeline_dir, seed, episode, fps, out_dir = args
+def _record_one(args: tuple[str, Path, int, int, int, Path, CameraRig | None]) -> tuple[int, bool, int]:
+    task_name, pipeline_dir, seed, episode, fps, out_dir, rig = args
     task = load_task(task_name, pipeline_dir)
     demo = demonstrate(task, episode_seed(seed, episode), fps)
-    write_episode(episode_path(out_dir, episode), task, demo, episode)
+    write_episode(episode_path(out_dir, episode), task, demo, episode, rig)
     return episode, demo.success, demo.frames
 
 
@@ -66,7 +84,7 @@ def record(task: Task, cfg: RecordConfig, out_dir: Path, force: bool = False) ->
     tmp = out_dir.with_name(f".{out_dir.name}.partial")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    jobs = [(task.name, task.objects_dir.parent, cfg.seed, e, cfg.fps, tmp) for e in range(cfg.episodes)]
+    jobs = [(task.name, task.objects_dir.parent, cfg.seed, e, cfg.fps, tmp, cfg.rig) for e in range(cfg.episodes)]
     start = time.perf_counter()
     results = []
     with Progress() as progress:

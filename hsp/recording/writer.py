@@ -4,6 +4,7 @@ CRCs, data CRC, full indexes, one ``hsp`` metadata record)."""
 from __future__ import annotations
 
 import json
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -12,8 +13,24 @@ from mcap.writer import CompressionType, Writer
 from mcap_ros2._dynamic import serialize_dynamic
 
 from hsp.fileio import atomic_path
-from hsp.recording.messages import GROUND_TRUTH_POSES, GROUND_TRUTH_SUBTASK, SUBTASK, TF_MESSAGE
+from hsp.recording.messages import (
+    CAMERA_INFO,
+    COLOR_FRAME,
+    COLOR_IMAGE,
+    COLOR_INFO,
+    DEPTH_IMAGE,
+    DEPTH_INFO,
+    GROUND_TRUTH_POSES,
+    GROUND_TRUTH_SUBTASK,
+    IMAGE,
+    SUBTASK,
+    TF_MESSAGE,
+    TF_STATIC,
+)
+from hsp.sim.camera import CameraConfig, sample_camera_pose
 from hsp.sim.demonstration import Demonstration
+from hsp.sim.depth_noise import DepthNoiseConfig, add_depth_noise
+from hsp.sim.render import RgbdRenderer, load_mesh
 from hsp.tasks.registry import Task
 
 WORLD_FRAME = "world"
@@ -62,13 +79,46 @@ def _quat(q: np.ndarray) -> dict:
     return {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}
 
 
-def write_episode(path: Path, task: Task, demo: Demonstration, episode: int) -> None:
-    """Write ground-truth poses and sub-task annotation of one demonstration, atomically."""
+def camera_info(cam: CameraConfig, header: dict) -> dict:
+    """``sensor_msgs/CameraInfo`` of an undistorted pinhole (``plumb_bob`` with zero d)."""
+    K = cam.K
+    P = np.concatenate([K, np.zeros((3, 1))], axis=1)
+    return {
+        "header": header, "height": cam.height, "width": cam.width, "distortion_model": "plumb_bob",
+        "d": [0.0] * 5, "k": K.ravel().tolist(), "r": np.eye(3).ravel().tolist(), "p": P.ravel().tolist(),
+        "binning_x": 0, "binning_y": 0,
+        "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+    }
+
+
+def image_msg(header: dict, image: np.ndarray, encoding: str) -> dict:
+    h, w = image.shape[:2]
+    return {"header": header, "height": h, "width": w, "encoding": encoding, "is_bigendian": 0,
+            "step": image.strides[0], "data": np.ascontiguousarray(image).tobytes()}
+
+
+@dataclass(frozen=True)
+class CameraRig:
+    """What the recording camera is: intrinsics, pose distribution, depth sensor model."""
+
+    camera: CameraConfig
+    noise: DepthNoiseConfig
+
+
+def write_episode(path: Path, task: Task, demo: Demonstration, episode: int, rig: CameraRig | None = None) -> None:
+    """Write one demonstration atomically: ground truth, and with a ``rig`` the RealSense
+    streams (colour, aligned depth, camera info, camera pose on ``/tf_static``)."""
+    rng = np.random.default_rng([demo.seed, 1])  # camera pose and sensor noise, apart from the demo's stream
+    renderer = RgbdRenderer([load_mesh(task.mesh(i)) for i in range(len(task.objects))], rig.camera) if rig else None
+    T_world_cam = sample_camera_pose(rig.camera, rng) if rig else None
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         w = Ros2McapWriter(f)
         w.metadata(
             "hsp",
             {
+                "camera": json.dumps(rig is not None),
+                "depth_unit": "mm",
+                "depth_noise": json.dumps(asdict(rig.noise) if rig else None),
                 "source": "simulation",
                 "task": task.name,
                 "episode": str(episode),
@@ -80,9 +130,22 @@ def write_episode(path: Path, task: Task, demo: Demonstration, episode: int) -> 
                 "demonstrator_success": json.dumps(bool(demo.success)),
             },
         )
+        if rig is not None:
+            w.write(TF_STATIC, TF_MESSAGE, {"transforms": [{
+                "header": {"stamp": stamp(0), "frame_id": WORLD_FRAME}, "child_frame_id": COLOR_FRAME,
+                "transform": {"translation": _xyz(T_world_cam[:3]), "rotation": _quat(T_world_cam[3:])},
+            }]}, 0)
         period = 1_000_000_000 // demo.fps
         for t in range(demo.frames):
             ns = t * period
+            if rig is not None:
+                rgb, depth, _ = renderer.render(T_world_cam, demo.poses[t])  # type: ignore[union-attr]
+                depth_mm = add_depth_noise(depth, rig.camera.fx, rig.noise, rng)
+                cam_header = {"stamp": stamp(ns), "frame_id": COLOR_FRAME}
+                w.write(COLOR_IMAGE, IMAGE, image_msg(cam_header, rgb, "rgb8"), ns, t)
+                w.write(DEPTH_IMAGE, IMAGE, image_msg(cam_header, depth_mm, "16UC1"), ns, t)
+                w.write(COLOR_INFO, CAMERA_INFO, camera_info(rig.camera, cam_header), ns, t)
+                w.write(DEPTH_INFO, CAMERA_INFO, camera_info(rig.camera, cam_header), ns, t)
             header = {"stamp": stamp(ns), "frame_id": WORLD_FRAME}
             transforms = [
                 {"header": header, "child_frame_id": name, "transform": {"translation": _xyz(P[:3]), "rotation": _quat(P[3:])}}
