@@ -40,8 +40,9 @@ class Ros2McapWriter:
     """Thin layer over ``mcap.writer.Writer`` that encodes ROS 2 messages with
     ``mcap_ros2``'s dynamic CDR serialiser."""
 
-    def __init__(self, stream: Any) -> None:
-        self._writer = Writer(stream, compression=CompressionType.ZSTD, enable_crcs=True, enable_data_crcs=True)
+    def __init__(self, stream: Any, chunk_size: int = 1 << 20) -> None:
+        self._writer = Writer(stream, chunk_size=chunk_size, compression=CompressionType.ZSTD, enable_crcs=True,
+                              enable_data_crcs=True)
         self._writer.start(profile="ros2", library="hsp")
         self._channels: dict[str, tuple[int, Any]] = {}
         self._schemas: dict[str, tuple[int, Any]] = {}
