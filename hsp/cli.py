@@ -105,10 +105,30 @@ def _not_available(stage: str, issue: int) -> None:
     _fail(HspError(f"`hsp {stage}` is not available yet (issue {issue})"))
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def parse(task: str = typer.Argument(...)) -> None:
-    """Track object poses in recordings and write a LeRobot dataset (not available yet)."""
-    _not_available("parse", 4)
+@app.command()
+def parse(
+    task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
+    recordings: Optional[Path] = typer.Option(None, help="recordings directory [data/recordings/TASK]"),
+    out: Optional[Path] = typer.Option(None, help="dataset directory [data/datasets/TASK]"),
+    poses_from: str = typer.Option("tracker", help="tracker | ground-truth (the ablation without perception error)"),
+    reports: Path = typer.Option(Path("reports"), help="reports directory"),
+) -> None:
+    """Turn recordings into 6D pose trajectories in a LeRobot v3.0 dataset."""
+    from hsp.dataset.build import parse as parse_recordings
+    from hsp.fileio import write_json
+    from hsp.tasks.registry import load_task
+
+    try:
+        t = load_task(task)
+        rec_dir = recordings or Path("data/recordings") / task
+        out_dir = out or Path("data/datasets") / task
+        log.info("parse %s: read %s (poses from %s)", task, rec_dir, poses_from)
+        report = parse_recordings(t, rec_dir, out_dir, poses_from=poses_from)
+        report_path = reports / task / "parse.json"
+        write_json(report_path, report)
+        log.info("wrote %s and %s in %.1f s", out_dir, report_path, report["seconds"])
+    except HspError as e:
+        _fail(e)
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})

@@ -39,7 +39,22 @@ def test_unknown_task_is_a_one_line_error(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize("stage", ["parse", "label", "train", "eval", "view"])
+def test_parse_ground_truth_ablation(tmp_path):
+    """record → parse --poses-from ground-truth → a dataset and a report; the tracker is not faked."""
+    rec, ds, reports = tmp_path / "rec", tmp_path / "ds", tmp_path / "reports"
+    assert runner.invoke(app, ["record", "painting", "--episodes", "1", "--out", str(rec), "--no-camera", "--workers", "1",
+                               "--reports", str(reports)]).exit_code == 0
+    result = runner.invoke(app, ["parse", "painting", "--recordings", str(rec), "--out", str(ds), "--poses-from", "ground-truth",
+                                 "--reports", str(reports)])
+    assert result.exit_code == 0, result.output
+    assert json.loads((reports / "painting" / "parse.json").read_text())["episodes"] == 1
+    assert (ds / "meta" / "info.json").is_file()
+    tracked = runner.invoke(app, ["parse", "painting", "--recordings", str(rec), "--out", str(tmp_path / "ds2")])
+    assert tracked.exit_code == 1 and "not available yet" in tracked.output
+    assert not (tmp_path / "ds2").exists()
+
+
+@pytest.mark.parametrize("stage", ["label", "train", "eval", "view"])
 def test_unfinished_stages_say_so(stage):
     result = runner.invoke(app, [stage, "painting"])
     assert result.exit_code == 1

@@ -1,0 +1,40 @@
+"""Reading pose trajectories back from a LeRobot dataset written by :mod:`hsp.dataset.writer`."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from hsp.dataset.features import ENV_STATE, STATE, STATUS
+from hsp.errors import HspError
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+
+def load_episodes(dataset_dir: Path, task_name: str) -> tuple[list[np.ndarray], list[np.ndarray], dict]:
+    """Per episode: world poses ``(T, n, 7)`` and status ``(T, n)``; plus the feature metadata.
+
+    Columns are read straight from the Arrow table (fast), split at the episode
+    boundaries that LeRobot's metadata records.
+    """
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    dataset_dir = Path(dataset_dir).resolve()
+    if not (dataset_dir / "meta" / "info.json").is_file():
+        raise HspError(f"{dataset_dir}: not a LeRobot dataset (no meta/info.json)")
+    ds = LeRobotDataset(f"hsp/{task_name}", root=dataset_dir)
+    feats = ds.meta.features
+    if ENV_STATE not in feats or STATUS not in feats:
+        raise HspError(f"{dataset_dir}: not an hsp pose dataset (features: {sorted(feats)})")
+    objects = [feats[STATE].get("object")] + list(feats[ENV_STATE].get("objects", []))
+    table = ds.hf_dataset.data
+    state = np.stack(table.column(STATE).to_numpy(zero_copy_only=False))
+    env = np.stack(table.column(ENV_STATE).to_numpy(zero_copy_only=False))
+    status = np.stack(table.column(STATUS).to_numpy(zero_copy_only=False))
+    poses = np.concatenate([state[:, None, :], env.reshape(len(env), -1, 7)], axis=1).astype(np.float64)
+    starts = ds.meta.episodes["dataset_from_index"]
+    ends = ds.meta.episodes["dataset_to_index"]
+    return ([poses[s:e] for s, e in zip(starts, ends)], [status[s:e] for s, e in zip(starts, ends)],
+            {"objects": objects, "tasks": sorted(set(ds.meta.tasks.index)), "fps": ds.fps})

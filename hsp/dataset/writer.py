@@ -1,0 +1,89 @@
+"""Writing pose trajectories as one LeRobot dataset, atomically.
+
+``LeRobotDataset.create`` → ``add_frame`` per frame → ``save_episode`` per recording →
+``finalize()`` exactly once, in a temporary root that is checked by re-opening it offline
+and then renamed into place; a failure leaves no dataset behind.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hsp.dataset.features import ACTION, ENV_STATE, STATE, STATUS, TrackStatus, features
+from hsp.errors import HspError
+from hsp.fileio import replace_dir
+from hsp.geometry import rotvec_delta
+from hsp.tasks.registry import Task
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")  # a missing local file must fail, not go to the Hub
+
+
+@dataclass
+class EpisodePoses:
+    """World poses of one episode: ``poses (T, n, 7)`` in task order, ``status (T, n)``."""
+
+    source: str
+    poses: np.ndarray
+    status: np.ndarray
+
+
+def actions(ee: np.ndarray, status: np.ndarray) -> np.ndarray:
+    """a_t = e_{t+1} − e_t (world translation + rotation vector), ``(T, 6)``; the last
+    frame and any step touching a lost end-effector pose get zeros."""
+    a = np.zeros((len(ee), 6))
+    if len(ee) > 1:
+        a[:-1] = rotvec_delta(ee[:-1], ee[1:])
+        bad = (status[:-1] == TrackStatus.LOST) | (status[1:] == TrackStatus.LOST)
+        a[:-1][bad] = 0.0
+    return a
+
+
+def repo_id(task: Task) -> str:
+    return f"hsp/{task.name}"
+
+
+def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, fps: int) -> dict[str, int]:
+    """Write all episodes to ``out_dir`` (replaced only on success); returns counts."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    out_dir = Path(out_dir).resolve()
+    tmp = out_dir.with_name(f".{out_dir.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    n = len(task.objects)
+    try:
+        ds = LeRobotDataset.create(repo_id(task), fps=fps, features=features(task), root=tmp, use_videos=False, robot_type="hsp")
+        frames, count = 0, 0
+        for ep in episodes:
+            T = len(ep.poses)
+            if ep.poses.shape != (T, n, 7) or ep.status.shape != (T, n):
+                raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} do not match {n} objects of {task.name!r}")
+            if T < 2:
+                raise HspError(f"{ep.source}: {T} frame(s); an episode needs at least 2")
+            good = ep.status != TrackStatus.LOST
+            if not np.all(np.isfinite(ep.poses[good])):
+                raise HspError(f"{ep.source}: NaN or infinite poses in frames not marked lost")
+            a = actions(ep.poses[:, 0], ep.status[:, 0]).astype(np.float32)
+            state = ep.poses[:, 0].astype(np.float32)
+            env = ep.poses[:, 1:].reshape(T, -1).astype(np.float32)
+            status = ep.status.astype(np.int64)
+            for t in range(T):
+                ds.add_frame({STATE: state[t], ENV_STATE: env[t], ACTION: a[t], STATUS: status[t], "task": task.name})
+            ds.save_episode()
+            frames += T
+            count += 1
+        if count == 0:
+            raise HspError("no episodes to write")
+        ds.finalize()
+        check = LeRobotDataset(repo_id(task), root=tmp)
+        if len(check) != frames or check.num_episodes != count:
+            raise HspError(f"{tmp}: wrote {count} episodes / {frames} frames but read back {check.num_episodes} / {len(check)}")
+        replace_dir(tmp, out_dir)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return {"episodes": count, "frames": frames}
