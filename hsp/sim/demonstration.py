@@ -56,7 +56,6 @@ class PlanContext:
     task: Task
     rng: np.random.Generator
     poses: Callable[[], np.ndarray]
-    grasped: Callable[[], int | None]
 
 
 class _Recorder:
@@ -142,7 +141,7 @@ def demonstrate(task: Task, seed: int, fps: int) -> Demonstration:
     with Scene(task, layout, task.spec.demonstrator.embodiment) as scene:
         for _ in range(SIM_HZ // 4):
             scene.substep(layout[0] if task.spec.demonstrator.embodiment == "hand" else scene.ee.tcp_pose())
-        ctx = PlanContext(task, rng, scene.object_poses, lambda: scene.bodies.index(scene.ee.gripper.held[0]) if scene.ee.gripper.held else None)
+        ctx = PlanContext(task, rng, scene.object_poses)
         rec = execute(scene, PLANS[task.spec.kind](ctx), fps, rng)
     poses = np.stack([r[0] for r in rec.rows])
     return Demonstration(

@@ -15,6 +15,7 @@ import numpy as np
 import pybullet as p
 
 from hsp.errors import HspError
+from hsp.geometry.mesh import obj_vertices
 from hsp.sim.coupling import SocketCoupling
 from hsp.sim.grasp import body_pose
 from hsp.sim.hand import FloatingHand
@@ -66,8 +67,7 @@ class Scene:
         if embodiment == "hand":
             self.ee: FloatingHand | KukaArm = FloatingHand(c, tool_urdf, layout[0])
         elif embodiment == "kuka":
-            top = float(np.max(np.loadtxt([ln for ln in task.mesh(0).read_text().splitlines() if ln.startswith("v ")], usecols=3)))
-            self.ee = KukaArm(c, tool_urdf, tool_length=top)
+            self.ee = KukaArm(c, tool_urdf, tool_length=float(obj_vertices(task.mesh(0))[:, 2].max()))
             self.ee.reset_to(layout[0])
         else:
             raise HspError(f"unknown embodiment {embodiment!r} (hand, kuka)")

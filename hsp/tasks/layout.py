@@ -3,7 +3,6 @@ every demonstration and every test episode)."""
 
 from __future__ import annotations
 
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -11,20 +10,16 @@ from scipy.spatial.transform import Rotation
 
 from hsp.errors import HspError
 from hsp.geometry import compose
+from hsp.geometry.mesh import obj_vertices
 from hsp.tasks.registry import Task
 
 ROBOT_BASE_RADIUS = 0.15
 """Keep-out disc around the robot base at the world origin (m)."""
 
 
-@lru_cache(maxsize=64)
 def mesh_extent(path: Path) -> tuple[float, float]:
     """(footprint radius in xy, height of the lowest point below the frame) of an OBJ."""
-    verts = np.array(
-        [[float(x) for x in line.split()[1:4]] for line in path.read_text().splitlines() if line.startswith("v ")]
-    )
-    if verts.size == 0:
-        raise HspError(f"{path}: no vertices in mesh")
+    verts = obj_vertices(path)
     return float(np.max(np.linalg.norm(verts[:, :2], axis=1))), float(-verts[:, 2].min())
 
 
