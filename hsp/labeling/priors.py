@@ -1,0 +1,128 @@
+"""The initial π_h, π_m, π_l of the paper (Section IV-A) as Viterbi scores.
+
+States are pairs p = (tool i, target j) with j ≠ end-effector and j ≠ i, and way-point
+indices k ≥ t; ``rel[t, p]`` is p_t[i, j], the tool's pose in the target's frame.
+
+* π_h (:meth:`PriorScores.unary`): the tool is the object moving most relative to the
+  other objects (end-effector excluded from the comparison); when none moves more than
+  ``moving_m`` per frame but the end-effector does, the end-effector is the tool. When
+  nothing moves at all there is no evidence (a held object pausing with the hand looks
+  exactly like a released one), and γ keeps the pair. The evidence is soft: the evidenced
+  tool gets 1 − ε, every other object ε/(n−1). Translation only: a lug nut turning in
+  place is not a tool.
+* π_m (:meth:`PriorScores.jump`): the paper's formula is ambiguous about normalisation.
+  Read as: keep the previous way-point index with probability β (a transition, see
+  :mod:`viterbi`), or jump to a later index k ≥ t with weight (1−β)/(H−t)·exp(−α‖ŵ_k‖),
+  ‖ŵ_k‖ being the tool's distance to the target at frame k. The weights are left
+  unnormalised over k, exactly as written, so nearness to the target (α = 100 per metre)
+  is what makes a frame a way-point, not the number of candidate frames.
+* π_l (:meth:`PriorScores.motion`): the observed step of the tool in the target frame,
+  Δ = p_{t+1}[i, j] − p_t[i, j] (translation), is scored as Gaussian (σ = ``motion_sigma_m``)
+  around a straight-line step of the same length toward the way-point, not overshooting it.
+
+Frames where an object is lost carry no evidence about it: its motion terms are 0 and
+such frames cannot be way-points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hsp.geometry import relative
+
+NEG = -np.inf
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    gamma: float = 0.95
+    """γ: probability of keeping the (tool, target) pair (paper, Section V-C)."""
+    alpha: float = 100.0
+    """α (1/m): preference for way-points where the tool is near the target."""
+    beta: float = 0.95
+    """β: probability of keeping the way-point index."""
+    tool_epsilon: float = 0.05
+    """ε: probability mass left for tools other than the motion evidence."""
+    moving_m: float = 0.002
+    """Per-frame relative translation (m) above which an object counts as moving."""
+    motion_sigma_m: float = 0.005
+    """σ of π_l around the straight-line step (m per frame)."""
+
+
+def pairs_of(n: int) -> np.ndarray:
+    """All (tool, target) index pairs, target ≠ 0 (end-effector) and ≠ tool: ``(P, 2)``."""
+    return np.array([(i, j) for i in range(n) for j in range(1, n) if j != i])
+
+
+def relative_poses(world: np.ndarray) -> np.ndarray:
+    """p_t[i, j] for all objects: ``(H, n, n, 7)`` from world poses ``(H, n, 7)``."""
+    H, n, _ = world.shape
+    return relative(world[:, :, None, :].repeat(n, 2), world[:, None, :, :].repeat(n, 1))
+
+
+def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float) -> np.ndarray:
+    """Per frame: the object moving most relative to the other non-end-effector objects
+    (mean per-frame change of their separation, world translation, so a rotating object
+    does not make the others look as if they moved); 0 (end-effector) when no such object
+    moves more than ``moving_m`` but the end-effector does; −1 when everything is still
+    (no evidence: a held object pausing with the hand); ``(H,)``."""
+    H, n = world.shape[:2]
+    x = world[:, :, :3]
+    sep = x[:, :, None, :] - x[:, None, :, :]  # (H, n, n, 3)
+    change = np.linalg.norm(np.diff(sep, axis=0), axis=-1)  # (H-1, n, n)
+    valid = ok[1:] & ok[:-1]
+    pair_ok = valid[:, :, None] & valid[:, None, :]
+    pair_ok[:, np.arange(n), np.arange(n)] = False
+    pair_ok[:, :, 0] = False  # separations from the end-effector do not count
+    motion = np.where(pair_ok, change, 0.0).sum(axis=2) / np.maximum(pair_ok.sum(axis=2), 1)
+    ee_ok = valid[:, :1] & valid
+    ee_ok[:, 0] = False
+    ee_motion = np.where(ee_ok, change[:, 0, :], 0.0).sum(axis=1) / np.maximum(ee_ok.sum(axis=1), 1)
+    motion[:, 0] = 0.0
+    tool = np.where(motion.max(axis=1) > moving_m, motion.argmax(axis=1), np.where(ee_motion > moving_m, 0, -1))
+    return np.append(tool, tool[-1]) if len(tool) else np.zeros(H, int)
+
+
+class PriorScores:
+    """:class:`~hsp.labeling.viterbi.Scores` from the hand-set priors of Section IV-A."""
+
+    def __init__(self, world: np.ndarray, ok: np.ndarray, cfg: PriorConfig) -> None:
+        self.H, n = world.shape[:2]
+        self.cfg = cfg
+        self.pairs = pairs_of(n)
+        self.P = len(self.pairs)
+        rel = relative_poses(world)
+        i, j = self.pairs[:, 0], self.pairs[:, 1]
+        self.rel = rel[:, i, j]  # (H, P, 7)
+        self.ok = ok[:, i] & ok[:, j]  # (H, P)
+        evidence = tool_evidence(world, ok, cfg.moving_m)
+        hit = np.log1p(-cfg.tool_epsilon)
+        miss = np.log(cfg.tool_epsilon / max(n - 1, 1))
+        self._unary = np.where(evidence[:, None] == i[None, :], hit, miss)  # (H, P)
+        self._unary[evidence < 0] = np.log(1.0 / n)  # everything still: no evidence
+        dist = np.linalg.norm(self.rel[..., :3], axis=-1).T  # (P, H)
+        self._near = np.where(self.ok.T, -cfg.alpha * dist, NEG)
+
+    def unary(self, t: int) -> np.ndarray:
+        return self._unary[t]
+
+    def jump(self, t: int) -> np.ndarray:
+        J = self._near - np.log(self.H - t)
+        J[:, :t] = NEG
+        return J
+
+    def motion(self, t: int) -> np.ndarray:
+        if t >= self.H - 1:
+            return np.zeros((self.P, self.H))
+        here = self.rel[t, :, :3]  # (P, 3)
+        delta = self.rel[t + 1, :, :3] - here
+        to_w = self.rel[:, :, :3].transpose(1, 0, 2) - here[:, None, :]  # (P, H, 3)
+        dist = np.linalg.norm(to_w, axis=-1)
+        speed = np.linalg.norm(delta, axis=-1)[:, None]
+        step = to_w * (np.minimum(speed, dist) / np.maximum(dist, 1e-9))[..., None]
+        err2 = np.sum((delta[:, None, :] - step) ** 2, axis=-1)
+        M = -err2 / (2 * self.cfg.motion_sigma_m**2)
+        usable = self.ok[t] & self.ok[t + 1]
+        return np.where(usable[:, None], M, 0.0)
