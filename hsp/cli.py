@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.logging import RichHandler
 from rich.table import Table
 
-from hsp.config import load_params, param
+from hsp.config import load_params, param, section
 from hsp.errors import HspError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
@@ -131,10 +131,37 @@ def parse(
         _fail(e)
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def label(task: str = typer.Argument(...)) -> None:
-    """Infer tool, target and way-point per frame with Viterbi (not available yet)."""
-    _not_available("label", 5)
+@app.command()
+def label(
+    task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
+    dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
+    out: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet]"),
+    recordings: Optional[Path] = typer.Option(None, help="recordings, to score the labels against the demonstrator's annotation"),
+    policy: Optional[Path] = typer.Option(None, help="trained model for EM refinement"),
+    reports: Path = typer.Option(Path("reports"), help="reports directory"),
+    params_file: Optional[Path] = PARAMS_OPTION,
+) -> None:
+    """Infer tool, target and way-point per frame with Viterbi over the paper's priors."""
+    from hsp.fileio import write_json
+    from hsp.labeling.priors import PriorConfig
+    from hsp.labeling.stage import label_dataset
+    from hsp.tasks.registry import load_task
+
+    try:
+        if policy is not None:
+            raise HspError("EM refinement with trained policies is not available yet (training issue)")
+        params = load_params(params_file)
+        cfg = section(params, "label", PriorConfig, ignore=("em_iterations",))
+        t = load_task(task)
+        ds = dataset or Path("data/datasets") / task
+        out_file = out or Path("data/labels") / f"{task}.parquet"
+        log.info("label %s: read %s", task, ds)
+        report = label_dataset(t, ds, out_file, cfg, recordings)
+        report_path = reports / task / "labels.json"
+        write_json(report_path, report)
+        log.info("wrote %s and %s in %.1f s", out_file, report_path, report["seconds"])
+    except HspError as e:
+        _fail(e)
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})

@@ -3,14 +3,16 @@ the defaults). Commands read their section from it; command-line options overrid
 
 from __future__ import annotations
 
+from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
 
 from hsp.errors import HspError
 
 DEFAULT_PARAMS = Path("params.yaml")
+C = TypeVar("C")
 
 
 def load_params(path: Path | None = None) -> dict[str, Any]:
@@ -37,3 +39,13 @@ def param(params: dict[str, Any], key: str, default: Any) -> Any:
             return default
         node = node[part]
     return node
+
+
+def section(params: dict[str, Any], name: str, cls: type[C], ignore: tuple[str, ...] = ()) -> C:
+    """A config dataclass from the ``name`` section; unknown keys are an error naming them."""
+    values = {k: v for k, v in (params.get(name) or {}).items() if k not in ignore}
+    known = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise HspError(f"params.yaml: {name}: unknown keys {unknown} (known: {sorted(known)})")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})

@@ -53,8 +53,21 @@ def test_parse_ground_truth_ablation(tmp_path):
     assert tracked.exit_code == 1 and "not available yet" in tracked.output
     assert not (tmp_path / "ds2").exists()
 
+    labels = tmp_path / "labels.parquet"
+    result = runner.invoke(app, ["label", "painting", "--dataset", str(ds), "--out", str(labels), "--recordings", str(rec),
+                                 "--reports", str(reports)])
+    assert result.exit_code == 0, result.output
+    report = json.loads((reports / "painting" / "labels.json").read_text())
+    assert {"tool_accuracy", "target_accuracy", "boundary_error_frames_median", "waypoint_error_mm_median", "seconds"} <= set(report)
+    import pandas as pd
 
-@pytest.mark.parametrize("stage", ["label", "train", "eval", "view"])
+    df = pd.read_parquet(labels)
+    assert len(df) == report["frames"] and (df["target"] != 0).all()
+    wrong = runner.invoke(app, ["label", "stacking-1", "--dataset", str(ds), "--out", str(tmp_path / "x.parquet")])
+    assert wrong.exit_code == 1 and "not those of task 'stacking-1'" in wrong.output
+
+
+@pytest.mark.parametrize("stage", ["train", "eval", "view"])
 def test_unfinished_stages_say_so(stage):
     result = runner.invoke(app, [stage, "painting"])
     assert result.exit_code == 1

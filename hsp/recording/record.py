@@ -6,13 +6,14 @@ import logging
 import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from rich.progress import Progress
 
+from hsp.config import section
 from hsp.errors import HspError
 from hsp.fileio import replace_dir
 from hsp.recording.writer import CameraRig, write_episode
@@ -48,15 +49,7 @@ class RecordConfig:
 
 def camera_rig(params: dict[str, Any]) -> CameraRig:
     """Camera and depth-sensor model from the ``camera`` and ``depth_noise`` params sections."""
-    def build(cls: type, section: str) -> Any:
-        values = params.get(section) or {}
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise HspError(f"params.yaml: {section}: unknown keys {unknown} (known: {sorted(known)})")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
-
-    return CameraRig(build(CameraConfig, "camera"), build(DepthNoiseConfig, "depth_noise"))
+    return CameraRig(section(params, "camera", CameraConfig), section(params, "depth_noise", DepthNoiseConfig))
 
 
 def episode_seed(seed: int, episode: int) -> int:

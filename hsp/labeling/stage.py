@@ -1,0 +1,64 @@
+"""The ``label`` stage: a pose dataset → pseudo-labels parquet (+ metrics against the
+demonstrator's annotation when the recordings are given)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from rich.progress import track
+
+from hsp.dataset.build import list_recordings
+from hsp.dataset.reader import load_episodes
+from hsp.errors import HspError
+from hsp.fileio import atomic_path
+from hsp.labeling.label import EpisodeLabels, label_episode
+from hsp.labeling.metrics import label_metrics
+from hsp.labeling.priors import PriorConfig
+from hsp.recording.ground_truth import read_ground_truth
+from hsp.tasks.registry import Task
+
+log = logging.getLogger(__name__)
+WAYPOINT_COLUMNS = ["waypoint_x", "waypoint_y", "waypoint_z", "waypoint_qx", "waypoint_qy", "waypoint_qz", "waypoint_qw"]
+
+
+def labels_frame(labels: list[EpisodeLabels]) -> pd.DataFrame:
+    """One row per frame: episode_index, frame_index, tool, target, waypoint_index, w (7)."""
+    parts = []
+    for e, lab in enumerate(labels):
+        H = len(lab.tool)
+        df = pd.DataFrame({"episode_index": np.full(H, e), "frame_index": np.arange(H), "tool": lab.tool,
+                           "target": lab.target, "waypoint_index": lab.waypoint_index})
+        df[WAYPOINT_COLUMNS] = lab.waypoint
+        parts.append(df)
+    return pd.concat(parts, ignore_index=True)
+
+
+def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfig,
+                  recordings_dir: Path | None = None) -> dict[str, float | int]:
+    start = time.perf_counter()
+    poses, status, meta = load_episodes(dataset_dir, task.name)
+    if meta["objects"] != task.names:
+        raise HspError(f"{dataset_dir}: dataset objects {meta['objects']} are not those of task {task.name!r} {task.names}")
+    labels = [label_episode(p, s, cfg) for p, s in track(list(zip(poses, status)), description=f"label {task.name}")]
+    with atomic_path(Path(out_file)) as tmp:
+        labels_frame(labels).to_parquet(tmp, index=False)
+    report: dict[str, float | int] = {"episodes": len(labels), "frames": int(sum(len(p) for p in poses))}
+    if recordings_dir is not None:
+        recs = list_recordings(recordings_dir)
+        if len(recs) != len(labels):
+            raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(labels)} dataset episodes")
+        truth = []
+        for path, p in zip(recs, poses):
+            gt = read_ground_truth(path)
+            if len(gt.tool) != len(p):
+                raise HspError(f"{path}: {len(gt.tool)} frames, the dataset episode has {len(p)}")
+            truth.append({"tool": gt.tool, "target": gt.target, "waypoint": gt.waypoint})
+        pred = [{"tool": lab.tool, "target": lab.target, "waypoint": lab.waypoint} for lab in labels]
+        report.update(label_metrics(pred, truth))
+    report["seconds"] = time.perf_counter() - start
+    log.info("labelled %d episodes from %s into %s in %.1f s", len(labels), dataset_dir, out_file, report["seconds"])
+    return report
