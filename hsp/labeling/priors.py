@@ -114,15 +114,16 @@ class PriorScores:
         return J
 
     def motion(self, t: int) -> np.ndarray:
-        if t >= self.H - 1:
-            return np.zeros((self.P, self.H))
+        M = np.zeros((self.P, self.H))
+        usable = self.ok[t] & self.ok[t + 1] if t < self.H - 1 else np.zeros(self.P, bool)
+        if not usable.any():
+            return M
         here = self.rel[t, :, :3]  # (P, 3)
         delta = self.rel[t + 1, :, :3] - here
-        to_w = self.rel[:, :, :3].transpose(1, 0, 2) - here[:, None, :]  # (P, H, 3)
+        to_w = self.rel[t:, :, :3].transpose(1, 0, 2) - here[:, None, :]  # (P, H - t, 3): only k >= t
         dist = np.linalg.norm(to_w, axis=-1)
         speed = np.linalg.norm(delta, axis=-1)[:, None]
         step = to_w * (np.minimum(speed, dist) / np.maximum(dist, 1e-9))[..., None]
         err2 = np.sum((delta[:, None, :] - step) ** 2, axis=-1)
-        M = -err2 / (2 * self.cfg.motion_sigma_m**2)
-        usable = self.ok[t] & self.ok[t + 1]
-        return np.where(usable[:, None], M, 0.0)
+        M[:, t:] = np.where(usable[:, None], -err2 / (2 * self.cfg.motion_sigma_m**2), 0.0)
+        return M

@@ -74,19 +74,24 @@ def viterbi(scores: Scores, transition: Transition) -> Path:
 
     F = np.log(1.0 / P) + jump_k + scores.jump(0) + scores.unary(0)[:, None] + scores.motion(0)
     for t in range(1, H):
-        G = F.max(axis=1)
-        best_k[t] = F.argmax(axis=1)
+        bk = F.argmax(axis=1)
+        G = F[np.arange(P), bk]
+        best_k[t] = bk
         order = np.argsort(-G, kind="stable")[:2] if P > 1 else np.array([0, 0])
         best_p[t] = order
         other = np.where(np.arange(P) == order[0], G[order[1]] if P > 1 else NEG, G[order[0]])
-        J = scores.jump(t)
-        A = F + stay_pair + keep_k
-        A[:, :t] = NEG
+        J = scores.jump(t)[:, t:]  # only way-points k >= t exist at t
+        A = F[:, t:] + (stay_pair + keep_k)
         B = (G + stay_pair + jump_k)[:, None] + J
         C = (other + switch_pair + jump_k)[:, None] + J
-        choice = np.argmax(np.stack([A, B, C]), axis=0).astype(np.int8)
-        F = np.choose(choice, [A, B, C]) + scores.unary(t)[:, None] + scores.motion(t)
-        code[t] = choice
+        # argmax over (A, B, C) with the first maximum winning ties, as np.argmax does
+        choice = np.where(B >= C, np.int8(1), np.int8(2))
+        best = np.maximum(B, C)
+        keep = A >= best
+        choice[keep] = 0
+        F = np.full((P, H), NEG)
+        F[:, t:] = np.where(keep, A, best) + scores.unary(t)[:, None] + scores.motion(t)[:, t:]
+        code[t, :, t:] = choice
     p, k = np.unravel_index(int(np.argmax(F)), F.shape)
     score = float(F[p, k])
     pairs, ks = np.empty(H, np.int64), np.empty(H, np.int64)
