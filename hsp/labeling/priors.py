@@ -102,7 +102,9 @@ class PriorScores:
         miss = np.log(cfg.tool_epsilon / max(n - 1, 1))
         self._unary = np.where(evidence[:, None] == i[None, :], hit, miss)  # (H, P)
         self._unary[evidence < 0] = np.log(1.0 / n)  # everything still: no evidence
-        dist = np.linalg.norm(self.rel[..., :3], axis=-1).T  # (P, H)
+        self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2))  # (P, H, 3)
+        self._sq = np.sum(self._xyz**2, axis=-1)  # (P, H)
+        dist = np.sqrt(self._sq)
         self._near = np.where(self.ok.T, -cfg.alpha * dist, NEG)
 
     def unary(self, t: int) -> np.ndarray:
@@ -114,16 +116,20 @@ class PriorScores:
         return J
 
     def motion(self, t: int) -> np.ndarray:
+        """‖δ − m·u/‖u‖‖² expanded so that no (P, H, 3) temporary is built: δ is the step
+        t → t+1, u = w_k − x_t the way to way-point k, m = min(‖δ‖, ‖u‖)."""
         M = np.zeros((self.P, self.H))
         usable = self.ok[t] & self.ok[t + 1] if t < self.H - 1 else np.zeros(self.P, bool)
         if not usable.any():
             return M
-        here = self.rel[t, :, :3]  # (P, 3)
-        delta = self.rel[t + 1, :, :3] - here
-        to_w = self.rel[t:, :, :3].transpose(1, 0, 2) - here[:, None, :]  # (P, H - t, 3): only k >= t
-        dist = np.linalg.norm(to_w, axis=-1)
-        speed = np.linalg.norm(delta, axis=-1)[:, None]
-        step = to_w * (np.minimum(speed, dist) / np.maximum(dist, 1e-9))[..., None]
-        err2 = np.sum((delta[:, None, :] - step) ** 2, axis=-1)
+        x = self._xyz[:, t]  # (P, 3)
+        delta = self._xyz[:, t + 1] - x
+        dots = np.matmul(self._xyz[:, t:], np.stack([x, delta], axis=-1))  # (P, H - t, 2)
+        d2 = self._sq[:, t:] - 2 * dots[..., 0] + np.sum(x * x, axis=1)[:, None]
+        dist = np.sqrt(np.maximum(d2, 0.0))
+        s2 = np.sum(delta * delta, axis=1)[:, None]
+        m = np.minimum(np.sqrt(s2), dist)
+        delta_u = dots[..., 1] - np.sum(delta * x, axis=1)[:, None]
+        err2 = s2 + m * m - 2 * m / np.maximum(dist, 1e-9) * delta_u
         M[:, t:] = np.where(usable[:, None], -err2 / (2 * self.cfg.motion_sigma_m**2), 0.0)
         return M
