@@ -111,17 +111,14 @@ class PriorScores:
         return self._unary[t]
 
     def jump(self, t: int) -> np.ndarray:
-        J = self._near - np.log(self.H - t)
-        J[:, :t] = NEG
-        return J
+        return self._near[:, t:] - np.log(self.H - t)
 
     def motion(self, t: int) -> np.ndarray:
         """‖δ − m·u/‖u‖‖² expanded so that no (P, H, 3) temporary is built: δ is the step
         t → t+1, u = w_k − x_t the way to way-point k, m = min(‖δ‖, ‖u‖)."""
-        M = np.zeros((self.P, self.H))
         usable = self.ok[t] & self.ok[t + 1] if t < self.H - 1 else np.zeros(self.P, bool)
         if not usable.any():
-            return M
+            return np.zeros((self.P, self.H - t))
         x = self._xyz[:, t]  # (P, 3)
         delta = self._xyz[:, t + 1] - x
         dots = np.matmul(self._xyz[:, t:], np.stack([x, delta], axis=-1))  # (P, H - t, 2)
@@ -131,5 +128,4 @@ class PriorScores:
         m = np.minimum(np.sqrt(s2), dist)
         delta_u = dots[..., 1] - np.sum(delta * x, axis=1)[:, None]
         err2 = s2 + m * m - 2 * m / np.maximum(dist, 1e-9) * delta_u
-        M[:, t:] = np.where(usable[:, None], -err2 / (2 * self.cfg.motion_sigma_m**2), 0.0)
-        return M
+        return np.where(usable[:, None], -err2 / (2 * self.cfg.motion_sigma_m**2), 0.0)

@@ -36,10 +36,10 @@ class Scores(Protocol):
         """U_t: (P,) log π_h of each pair at frame t (tool evidence, target prior)."""
 
     def jump(self, t: int) -> np.ndarray:
-        """J_t: (P, H) log-weight of choosing way-point k at t; −inf for k < t."""
+        """J_t: (P, H − t) log-weight of choosing way-point k = t, …, H−1 at frame t."""
 
     def motion(self, t: int) -> np.ndarray:
-        """M_t: (P, H) log π_l of the motion from t to t+1 aiming at way-point k."""
+        """M_t: (P, H − t) log π_l of the motion from t to t+1 aiming at way-point k ≥ t."""
 
 
 @dataclass(frozen=True)
@@ -72,16 +72,18 @@ def viterbi(scores: Scores, transition: Transition) -> Path:
     best_k = np.zeros((H, P), np.int32)  # argmax_k' F_{t-1}(p, k')
     best_p = np.zeros((H, 2), np.int32)  # top-2 pairs of max_k' F_{t-1}
 
+    # F holds F_t(p, k) for k = t, …, H−1 only (way-points are never in the past).
     F = np.log(1.0 / P) + jump_k + scores.jump(0) + scores.unary(0)[:, None] + scores.motion(0)
+    rows = np.arange(P)
     for t in range(1, H):
         bk = F.argmax(axis=1)
-        G = F[np.arange(P), bk]
-        best_k[t] = bk
+        G = F[rows, bk]
+        best_k[t] = bk + (t - 1)
         order = np.argsort(-G, kind="stable")[:2] if P > 1 else np.array([0, 0])
         best_p[t] = order
-        other = np.where(np.arange(P) == order[0], G[order[1]] if P > 1 else NEG, G[order[0]])
-        J = scores.jump(t)[:, t:]  # only way-points k >= t exist at t
-        A = F[:, t:] + (stay_pair + keep_k)
+        other = np.where(rows == order[0], G[order[1]] if P > 1 else NEG, G[order[0]])
+        J = scores.jump(t)
+        A = F[:, 1:] + (stay_pair + keep_k)
         B = (G + stay_pair + jump_k)[:, None] + J
         C = (other + switch_pair + jump_k)[:, None] + J
         # argmax over (A, B, C) with the first maximum winning ties, as np.argmax does
@@ -89,11 +91,11 @@ def viterbi(scores: Scores, transition: Transition) -> Path:
         best = np.maximum(B, C)
         keep = A >= best
         choice[keep] = 0
-        F = np.full((P, H), NEG)
-        F[:, t:] = np.where(keep, A, best) + scores.unary(t)[:, None] + scores.motion(t)[:, t:]
+        F = np.where(keep, A, best) + scores.unary(t)[:, None] + scores.motion(t)
         code[t, :, t:] = choice
     p, k = np.unravel_index(int(np.argmax(F)), F.shape)
     score = float(F[p, k])
+    k += H - 1  # F's columns are k = H−1, … at the last frame
     pairs, ks = np.empty(H, np.int64), np.empty(H, np.int64)
     for t in range(H - 1, -1, -1):
         pairs[t], ks[t] = p, k

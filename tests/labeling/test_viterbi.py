@@ -21,10 +21,10 @@ class RandomScores:
         return self.U[t]
 
     def jump(self, t):
-        return self.J[t]
+        return self.J[t, :, t:]
 
     def motion(self, t):
-        return self.M[t]
+        return self.M[t, :, t:]
 
 
 def path_score(s: RandomScores, tr: Transition, pairs, ks) -> float:
