@@ -1,0 +1,58 @@
+"""Pose-tracking errors against ground truth: translation, symmetry-aware rotation, ADD-S
+and its area under the accuracy curve (0–10 cm, ×100, as se(3)-TrackNet's VOCap)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from hsp.geometry import transform_points
+from hsp.tasks.spec import Symmetry
+
+AUC_MAX_M = 0.10
+
+
+def symmetry_rotations(symmetry: Symmetry) -> np.ndarray:
+    """Rotations ``(K, 3, 3)`` that map the object onto itself (finite symmetries)."""
+    if symmetry == "cube":
+        return Rotation.create_group("O").as_matrix()
+    k = {"none": 1, "z_2fold": 2, "z_4fold": 4, "z_6fold": 6}.get(symmetry)
+    if k is None:
+        raise ValueError(f"{symmetry!r} is continuous; use rotation_error_deg")
+    return Rotation.from_euler("z", (np.arange(k) * 2 * np.pi / k)[:, None]).as_matrix()
+
+
+def rotation_error_deg(q_est: np.ndarray, q_gt: np.ndarray, symmetry: Symmetry) -> np.ndarray:
+    """Smallest rotation angle (deg) between estimate and any symmetric equivalent of the
+    truth; for ``z_continuous`` the angle between the two z axes. ``(..., 4)`` → ``(...)``."""
+    R_est = Rotation.from_quat(np.asarray(q_est).reshape(-1, 4)).as_matrix()
+    R_gt = Rotation.from_quat(np.asarray(q_gt).reshape(-1, 4)).as_matrix()
+    if symmetry == "z_continuous":
+        cos = np.clip(np.sum(R_est[:, :, 2] * R_gt[:, :, 2], axis=1), -1, 1)
+        return np.degrees(np.arccos(cos)).reshape(np.shape(q_est)[:-1])
+    S = symmetry_rotations(symmetry)
+    rel = np.einsum("nji,njk->nik", R_gt, R_est)  # R_gt^T R_est
+    traces = np.einsum("nik,mki->nm", rel, S)  # trace(rel · S_m)
+    cos = np.clip((traces.max(axis=1) - 1) / 2, -1, 1)
+    return np.degrees(np.arccos(cos)).reshape(np.shape(q_est)[:-1])
+
+
+def add_s(points: np.ndarray, pose_est: np.ndarray, pose_gt: np.ndarray) -> np.ndarray:
+    """ADD-S (m): mean distance from each model point under the estimate to the nearest
+    model point under the truth; ``points (M, 3)``, poses ``(T, 7)`` → ``(T,)``."""
+    out = np.empty(len(pose_est))
+    for t, (pe, pg) in enumerate(zip(pose_est, pose_gt)):
+        tree = cKDTree(transform_points(pg, points))
+        out[t] = tree.query(transform_points(pe, points))[0].mean()
+    return out
+
+
+def auc(errors_m: np.ndarray, max_m: float = AUC_MAX_M) -> float:
+    """Area under accuracy-vs-threshold on [0, max_m], ×100 (100 = every error is 0)."""
+    e = np.sort(np.asarray(errors_m, float).ravel())
+    if e.size == 0:
+        return float("nan")
+    thresholds = np.linspace(0, max_m, 1001)
+    accuracy = np.searchsorted(e, thresholds, side="right") / e.size
+    return float(np.trapezoid(accuracy, thresholds) / max_m * 100.0)
