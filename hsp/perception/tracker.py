@@ -3,7 +3,8 @@
 For each object and frame: predict with damped constant velocity, crop the scene points
 near the prediction (table removed, colour-gated by the object's palette), express them
 in the predicted object frame and align them to the model's surface samples (exact
-normals) with a Tukey-robust point-to-plane ICP, gates 15 mm then 6 mm. Each pose is
+normals) with a Tukey-robust point-to-plane ICP, gates 15 mm then 6 mm. A point near
+several objects goes to the one whose predicted surface is nearest. Each pose is
 marked ok / suspect / lost from the number of supporting points and the inlier RMSE.
 
 Initialisation (the scene-level pose estimate of the first frame) is not built yet; the
@@ -18,6 +19,7 @@ import numpy as np
 import open3d as o3d
 
 from hsp.dataset.features import TrackStatus
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
@@ -73,6 +75,26 @@ def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig) -> tupl
     return T, float(result.inlier_rmse), int(len(result.correspondence_set))
 
 
+def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], pred: np.ndarray,
+                  cfg: TrackerConfig) -> np.ndarray:
+    """Owner of each scene point ``(N,)``: the object whose predicted surface is nearest,
+    among those whose crop and colour palette admit the point; −1 for none. Occluding and
+    touching objects (a hand on a block, nuts on a wheel) thus never share points."""
+    best = np.full(len(pts), np.inf)
+    owner = np.full(len(pts), -1)
+    for i, model in enumerate(models):
+        cand = np.flatnonzero(np.linalg.norm(pts - pred[i, :3], axis=1) < model.radius + cfg.crop_margin_m)
+        cand = cand[model.colour_mask(cols[cand], cfg.colour_tolerance)]
+        if cand.size == 0:
+            continue
+        surface = np.asarray(model.cloud.points) @ pose_to_matrix(pred[i])[:3, :3].T + pred[i, :3]
+        d = cKDTree(surface).query(pts[cand], distance_upper_bound=cfg.crop_margin_m)[0]
+        closer = d < best[cand]
+        best[cand[closer]] = d[closer]
+        owner[cand[closer]] = i
+    return owner
+
+
 def predict(prev: np.ndarray, dx: np.ndarray, drot: np.ndarray, alpha: float) -> np.ndarray:
     """Damped constant velocity: the centre moves on by α·Δx and the orientation turns by
     α of the last rotation (about the object's own centre), ``(n, 7)``."""
@@ -95,10 +117,9 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
         keep = pts[:, 2] > cfg.table_clearance_m
         pts, cols = pts[keep], cols[keep]
         pred = predict(prev, dx, drot, cfg.damping)
+        owner = assign_points(pts, cols, models, pred, cfg)
         for i, model in enumerate(models):
-            near = np.linalg.norm(pts - pred[i, :3], axis=1) < model.radius + cfg.crop_margin_m
-            sel = np.flatnonzero(near)
-            sel = sel[model.colour_mask(cols[sel], cfg.colour_tolerance)]
+            sel = np.flatnonzero(owner == i)
             if sel.size < cfg.min_points:
                 poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
                 continue
