@@ -54,6 +54,8 @@ class ObjectModel:
         self.cloud = m.sample_points_uniformly(n_points, use_triangle_normal=True)
         self.radius = float(np.max(np.linalg.norm(mesh.vertices, axis=1)))
         self.palette = np.unique(np.round(chromaticity(mesh.face_rgb), 3), axis=0)
+        self.face_centres = mesh.vertices[mesh.triangles].mean(axis=1)
+        self.face_rgb = mesh.face_rgb
 
     def colour_mask(self, rgb: np.ndarray, tol: float) -> np.ndarray:
         c = chromaticity(rgb)

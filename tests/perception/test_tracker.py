@@ -1,9 +1,12 @@
-"""The frame-to-frame tracker follows every object of a noisy recording from its start pose."""
+"""The tracker and the first-frame initialiser on a noisy 640×480 recording."""
 
 import numpy as np
+import pytest
 
+from hsp.perception.initialize import initialize
 from hsp.perception.metrics import rotation_error_deg
-from hsp.perception.tracker import TrackerConfig, track
+from hsp.perception.pointcloud import backproject
+from hsp.perception.tracker import ObjectModel, TrackerConfig, track
 from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.reader import read_recording
 from hsp.recording.record import RecordConfig, record
@@ -13,18 +16,35 @@ from hsp.sim.depth_noise import DepthNoiseConfig
 from hsp.sim.render import load_mesh
 
 
-def test_tracking_from_the_first_pose_stays_within_millimetres(tasks, tmp_path):
+@pytest.fixture(scope="module")
+def episode(tasks, tmp_path_factory):
     task = tasks["stacking-1"]
-    rig = CameraRig(CameraConfig(), DepthNoiseConfig())
-    record(task, RecordConfig(episodes=1, seed=4, workers=1, rig=rig), tmp_path / "rec")
-    path = tmp_path / "rec" / "episode_000000.mcap"
-    rec, gt = read_recording(path), read_ground_truth(path)
+    out = tmp_path_factory.mktemp("rec") / "stacking-1"
+    record(task, RecordConfig(episodes=1, seed=4, workers=1, rig=CameraRig(CameraConfig(), DepthNoiseConfig())), out)
+    path = out / "episode_000000.mcap"
+    return task, read_recording(path), read_ground_truth(path), [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
+
+
+def test_tracking_from_the_first_pose_stays_within_millimetres(episode):
+    task, rec, gt, meshes = episode
     n = 60
-    poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam,
-                          [load_mesh(task.mesh(i)) for i in range(len(task.objects))], gt.poses[0], TrackerConfig())
+    poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam, meshes, gt.poses[0], TrackerConfig())
     err_mm = np.linalg.norm(poses[:, :, :3] - gt.poses[:n, :, :3], axis=-1) * 1000
     assert np.median(err_mm) < 3.0, np.median(err_mm, axis=0)
     assert np.percentile(err_mm, 95) < 10.0
     assert (status == 2).mean() < 0.05
     rot = rotation_error_deg(poses[:, 0, 3:], gt.poses[:n, 0, 3:], "none")
     assert np.median(rot) < 5.0  # first version; issue 4 asks for a 2° median
+
+
+def test_initialiser_finds_the_blocks_on_the_table(episode):
+    """Blocks resting on the table are found within 5 mm and 10° (the hand in the air is
+    not reliable yet)."""
+    task, rec, gt, meshes = episode
+    pts, cols = backproject(rec.depth[0], rec.rgb[0], rec.K, rec.T_world_cam, 2)
+    keep = pts[:, 2] > 0.003
+    poses, found = initialize(task, pts[keep], cols[keep], [ObjectModel(m, 1500) for m in meshes])
+    for i in range(1, len(task.objects)):
+        assert found[i]
+        assert np.linalg.norm(poses[i, :3] - gt.poses[0, i, :3]) < 0.005
+        assert rotation_error_deg(poses[i, 3:], gt.poses[0, i, 3:], "cube") < 10.0

@@ -1,0 +1,99 @@
+"""First-frame pose estimates (the scene-level estimate that starts tracking).
+
+Each object is looked for among the points that match its colour palette, grouped into
+clusters (DBSCAN). From each of the largest clusters, pose hypotheses are refined by the
+tracker's ICP: objects standing on the table keep their resting attitude (the layout is
+physically consistent: upright, at the height where the model touches z = 0) and try a
+grid of yaw angles; the end-effector is assumed to point down and tries the same grid.
+The hypothesis with the most inliers at the finest gate wins; identical objects (same
+palette) take distinct clusters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+from scipy.spatial.transform import Rotation
+
+from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
+from hsp.geometry.mesh import obj_vertices
+from hsp.perception.tracker import ObjectModel, TrackerConfig, _icp
+from hsp.tasks.registry import Task
+
+YAW_STEPS = 16
+CLUSTER_EPS_M = 0.012
+MAX_CLUSTERS = 3
+
+
+def _clusters(points: np.ndarray) -> list[np.ndarray]:
+    """Index arrays of the DBSCAN clusters of ``points``, largest first."""
+    if len(points) < 10:
+        return []
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    labels = np.asarray(pcd.cluster_dbscan(eps=CLUSTER_EPS_M, min_points=8))
+    groups = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)] if labels.size else []
+    return sorted(groups, key=len, reverse=True)
+
+
+def distinctive_palettes(task: Task, models: list[ObjectModel], tol: float) -> list[np.ndarray]:
+    """Each object's colours that no differently labelled object of the task has (the
+    brush's brown, not its grey ferrule, which the canvas shares); all colours if none."""
+    out = []
+    for i, model in enumerate(models):
+        others = [m.palette for j, m in enumerate(models) if task.labels[j] != task.labels[i]]
+        other = np.concatenate(others) if others else np.zeros((0, 3))
+        keep = [c for c in model.palette if other.size == 0 or np.min(np.linalg.norm(other - c, axis=1)) > tol]
+        out.append(np.array(keep) if keep else model.palette)
+    return out
+
+
+def _matches(cols: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
+    c = cols / np.maximum(cols.sum(axis=1, keepdims=True), 1e-6)
+    return np.min(np.linalg.norm(c[:, None, :] - palette[None], axis=-1), axis=1) <= tol
+
+
+def _anchor(mesh_path, face_centres: np.ndarray, face_rgb: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
+    """Centre, in the object frame, of the model's faces in the distinctive colours: the
+    point a cluster of those colours is centred on (the palm, not the fingertips)."""
+    sel = _matches(face_rgb, palette, tol)
+    return face_centres[sel].mean(axis=0) if sel.any() else face_centres.mean(axis=0)
+
+
+def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel],
+               cfg: TrackerConfig = TrackerConfig()) -> tuple[np.ndarray, np.ndarray]:
+    """World poses ``(n, 7)`` at the first frame and whether each was found ``(n,)``."""
+    n = len(models)
+    poses = np.tile([0, 0, 0, 0, 0, 0, 1.0], (n, 1))
+    found = np.zeros(n, bool)
+    taken: dict[bytes, set[int]] = {}
+    yaws = np.arange(YAW_STEPS) * 2 * np.pi / YAW_STEPS
+    palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
+    for i, (obj, model) in enumerate(zip(task.objects, models)):
+        mask = np.flatnonzero(_matches(cols, palettes[i], cfg.colour_tolerance))
+        anchor = _anchor(task.mesh(i), model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
+        groups = _clusters(pts[mask])
+        key = palettes[i].tobytes()
+        used = taken.setdefault(key, set())
+        best = (-1, None, -1)
+        for g, idx in enumerate(groups[: MAX_CLUSTERS + len(used)]):
+            if g in used:
+                continue
+            seen = pts[mask[idx]].mean(axis=0)
+            for yaw in yaws:
+                R = Rotation.from_euler("z", yaw)
+                centre = seen - R.apply(anchor)
+                if i > 0 and obj.place.support == "table":
+                    centre[2] = -obj_vertices(task.mesh(i))[:, 2].min()
+                near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) < model.radius + cfg.crop_margin_m)
+                near = pts[near[model.colour_mask(cols[near], cfg.colour_tolerance)]]
+                if len(near) < cfg.min_points:
+                    continue
+                guess = np.concatenate([centre, R.as_quat()])
+                local = (near - guess[:3]) @ pose_to_matrix(guess)[:3, :3]
+                corr, rmse, inliers = _icp(model, local, TrackerConfig(gates_m=(0.03, 0.015, 0.006)))
+                if inliers > best[0]:
+                    best = (inliers, compose(guess, pose_from_matrix(np.linalg.inv(corr))), g)
+        if best[1] is not None and best[0] >= cfg.min_points:
+            poses[i], found[i] = best[1], True
+            used.add(best[2])
+    return poses, found
