@@ -59,9 +59,10 @@ def _anchor(mesh_path, face_centres: np.ndarray, face_rgb: np.ndarray, palette: 
     return face_centres[sel].mean(axis=0) if sel.any() else face_centres.mean(axis=0)
 
 
-def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel],
+def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], camera: np.ndarray,
                cfg: TrackerConfig = TrackerConfig()) -> tuple[np.ndarray, np.ndarray]:
-    """World poses ``(n, 7)`` at the first frame and whether each was found ``(n,)``."""
+    """World poses ``(n, 7)`` at the first frame and whether each was found ``(n,)``;
+    ``camera (3,)`` is the camera's world position (for back-face culling)."""
     n = len(models)
     poses = np.tile([0, 0, 0, 0, 0, 0, 1.0], (n, 1))
     found = np.zeros(n, bool)
@@ -79,18 +80,21 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
             if g in used:
                 continue
             seen = pts[mask[idx]].mean(axis=0)
-            for yaw in yaws:
+            resting = i > 0 and obj.place.support == "table"
+            lifts = [0.0] if resting else [-0.04, -0.02, 0.0, 0.02, 0.04]  # visible part vs anchor, in the air
+            for yaw, lift in ((y, dz) for y in yaws for dz in lifts):
                 R = Rotation.from_euler("z", yaw)
-                centre = seen - R.apply(anchor)
-                if i > 0 and obj.place.support == "table":
+                centre = seen - R.apply(anchor) + [0.0, 0.0, lift]
+                if resting:
                     centre[2] = -obj_vertices(task.mesh(i))[:, 2].min()
                 near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) < model.radius + cfg.crop_margin_m)
                 near = pts[near[model.colour_mask(cols[near], cfg.colour_tolerance)]]
                 if len(near) < cfg.min_points:
                     continue
                 guess = np.concatenate([centre, R.as_quat()])
-                local = (near - guess[:3]) @ pose_to_matrix(guess)[:3, :3]
-                corr, rmse, inliers = _icp(model, local, TrackerConfig(gates_m=(0.03, 0.015, 0.006)))
+                M = pose_to_matrix(guess)[:3, :3]
+                local = (near - guess[:3]) @ M
+                corr, rmse, inliers = _icp(model, local, TrackerConfig(gates_m=(0.03, 0.015, 0.006)), (camera - guess[:3]) @ M)
                 if inliers > best[0]:
                     best = (inliers, compose(guess, pose_from_matrix(np.linalg.inv(corr))), g)
         if best[1] is not None and best[0] >= cfg.min_points:

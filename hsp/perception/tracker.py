@@ -45,13 +45,28 @@ class TrackerConfig:
     model_points: int = 1500
 
 
+def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` points uniformly on the mesh surface and their face normals, ``(n, 3)`` each
+    (seeded, so that tracking is reproducible)."""
+    v = mesh.vertices[mesh.triangles]  # (F, 3, 3)
+    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    area = np.linalg.norm(cross, axis=1)
+    face = rng.choice(len(area), size=n, p=area / area.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    flip = r1 + r2 > 1
+    r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
+    a, b, c = v[face, 0], v[face, 1], v[face, 2]
+    points = a + r1[:, None] * (b - a) + r2[:, None] * (c - a)
+    return points, cross[face] / np.maximum(area[face], 1e-12)[:, None]
+
+
 class ObjectModel:
     """Surface samples with normals and the colour palette of one object."""
 
-    def __init__(self, mesh: Mesh, n_points: int) -> None:
-        m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(mesh.vertices), o3d.utility.Vector3iVector(mesh.triangles.astype(np.int32)))
-        m.compute_triangle_normals()
-        self.cloud = m.sample_points_uniformly(n_points, use_triangle_normal=True)
+    def __init__(self, mesh: Mesh, n_points: int, seed: int = 0) -> None:
+        points, normals = sample_surface(mesh, n_points, np.random.default_rng(seed))
+        self.cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        self.cloud.normals = o3d.utility.Vector3dVector(normals)
         self.radius = float(np.max(np.linalg.norm(mesh.vertices, axis=1)))
         self.palette = np.unique(np.round(chromaticity(mesh.face_rgb), 3), axis=0)
         self.face_centres = mesh.vertices[mesh.triangles].mean(axis=1)
@@ -62,16 +77,24 @@ class ObjectModel:
         return np.min(np.linalg.norm(c[:, None, :] - self.palette[None], axis=-1), axis=1) <= tol
 
 
-def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig) -> tuple[np.ndarray, float, int]:
+def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig,
+         camera_obj: np.ndarray | None = None) -> tuple[np.ndarray, float, int]:
     """Correction ``T (4, 4)`` taking the points (in the predicted object frame) onto the
-    model, the inlier RMSE and the inlier count at the last gate."""
+    model, the inlier RMSE and the inlier count at the last gate. With the camera position
+    in the object frame, only model samples facing the camera are matched (back faces
+    cannot have produced the points)."""
+    target = model.cloud
+    if camera_obj is not None:
+        P, N = np.asarray(model.cloud.points), np.asarray(model.cloud.normals)
+        facing = np.flatnonzero(np.sum(N * (camera_obj - P), axis=1) > 0)
+        target = model.cloud.select_by_index(facing)
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_obj))
     T = np.eye(4)
     est = o3d.pipelines.registration.TransformationEstimationPointToPlane(o3d.pipelines.registration.TukeyLoss(k=cfg.tukey_m))
     result = None
     for gate in cfg.gates_m:
         result = o3d.pipelines.registration.registration_icp(
-            src, model.cloud, gate, T, est, o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=20))
+            src, target, gate, T, est, o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=20))
         T = result.transformation
     assert result is not None
     return T, float(result.inlier_rmse), int(len(result.correspondence_set))
@@ -126,7 +149,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                 poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
                 continue
             local = (pts[sel] - pred[i, :3]) @ pose_to_matrix(pred[i])[:3, :3]
-            corr, rmse, inliers = _icp(model, local, cfg)
+            corr, rmse, inliers = _icp(model, local, cfg)  # no culling here: it lost objects mid-turn
             poses[t, i] = compose(pred[i], pose_from_matrix(np.linalg.inv(corr)))
             if inliers < cfg.min_points:
                 status[t, i] = TrackStatus.LOST
