@@ -52,7 +52,7 @@ def _matches(cols: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
     return np.min(np.linalg.norm(c[:, None, :] - palette[None], axis=-1), axis=1) <= tol
 
 
-def _anchor(mesh_path, face_centres: np.ndarray, face_rgb: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
+def _anchor(face_centres: np.ndarray, face_rgb: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
     """Centre, in the object frame, of the model's faces in the distinctive colours: the
     point a cluster of those colours is centred on (the palm, not the fingertips)."""
     sel = _matches(face_rgb, palette, tol)
@@ -71,7 +71,7 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
     palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
     for i, (obj, model) in enumerate(zip(task.objects, models)):
         mask = np.flatnonzero(_matches(cols, palettes[i], cfg.colour_tolerance))
-        anchor = _anchor(task.mesh(i), model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
+        anchor = _anchor(model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
         groups = _clusters(pts[mask])
         key = palettes[i].tobytes()
         used = taken.setdefault(key, set())

@@ -15,7 +15,6 @@ topics (``/hsp/ground_truth/*``) are never read here.
 from __future__ import annotations
 
 import logging
-from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
