@@ -16,8 +16,9 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.geometry.mesh import obj_vertices
+from hsp.perception.pointcloud import palette_mask
 from hsp.perception.tracker import ObjectModel, TrackerConfig, _icp
+from hsp.tasks.layout import mesh_extent
 from hsp.tasks.registry import Task
 
 YAW_STEPS = 16
@@ -47,15 +48,10 @@ def distinctive_palettes(task: Task, models: list[ObjectModel], tol: float) -> l
     return out
 
 
-def _matches(cols: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
-    c = cols / np.maximum(cols.sum(axis=1, keepdims=True), 1e-6)
-    return np.min(np.linalg.norm(c[:, None, :] - palette[None], axis=-1), axis=1) <= tol
-
-
 def _anchor(face_centres: np.ndarray, face_rgb: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
     """Centre, in the object frame, of the model's faces in the distinctive colours: the
     point a cluster of those colours is centred on (the palm, not the fingertips)."""
-    sel = _matches(face_rgb, palette, tol)
+    sel = palette_mask(face_rgb, palette, tol)
     return face_centres[sel].mean(axis=0) if sel.any() else face_centres.mean(axis=0)
 
 
@@ -70,23 +66,23 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
     yaws = np.arange(YAW_STEPS) * 2 * np.pi / YAW_STEPS
     palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
     for i, (obj, model) in enumerate(zip(task.objects, models)):
-        mask = np.flatnonzero(_matches(cols, palettes[i], cfg.colour_tolerance))
+        mask = np.flatnonzero(palette_mask(cols, palettes[i], cfg.colour_tolerance))
         anchor = _anchor(model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
         groups = _clusters(pts[mask])
         key = palettes[i].tobytes()
         used = taken.setdefault(key, set())
+        rest_height = mesh_extent(task.mesh(i))[1] if i > 0 and obj.place.support == "table" else None
+        lifts = [0.0] if rest_height is not None else [-0.04, -0.02, 0.0, 0.02, 0.04]  # visible part vs anchor, in the air
         best = (-1, None, -1)
         for g, idx in enumerate(groups[: MAX_CLUSTERS + len(used)]):
             if g in used:
                 continue
             seen = pts[mask[idx]].mean(axis=0)
-            resting = i > 0 and obj.place.support == "table"
-            lifts = [0.0] if resting else [-0.04, -0.02, 0.0, 0.02, 0.04]  # visible part vs anchor, in the air
             for yaw, lift in ((y, dz) for y in yaws for dz in lifts):
                 R = Rotation.from_euler("z", yaw)
                 centre = seen - R.apply(anchor) + [0.0, 0.0, lift]
-                if resting:
-                    centre[2] = -obj_vertices(task.mesh(i))[:, 2].min()
+                if rest_height is not None:
+                    centre[2] = rest_height
                 near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) < model.radius + cfg.crop_margin_m)
                 near = pts[near[model.colour_mask(cols[near], cfg.colour_tolerance)]]
                 if len(near) < cfg.min_points:

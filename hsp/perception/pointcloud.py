@@ -22,3 +22,10 @@ def backproject(depth: np.ndarray, rgb: np.ndarray, K: np.ndarray, T_world_cam: 
 def chromaticity(rgb: np.ndarray) -> np.ndarray:
     """Brightness-free colour ``(…, 3)``: r, g, b over their sum (shading cancels)."""
     return rgb / np.maximum(rgb.sum(axis=-1, keepdims=True), 1e-6)
+
+
+def palette_mask(rgb: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
+    """Which colours ``(N, 3)`` lie within chromaticity distance ``tol`` of a palette
+    colour ``(K, 3)`` (palette given as chromaticities), ``(N,)`` bool."""
+    c = chromaticity(rgb)
+    return np.min(np.linalg.norm(c[:, None, :] - palette[None], axis=-1), axis=1) <= tol

@@ -7,8 +7,8 @@ normals) with a Tukey-robust point-to-plane ICP, gates 15 mm then 6 mm. A point 
 several objects goes to the one whose predicted surface is nearest. Each pose is
 marked ok / suspect / lost from the number of supporting points and the inlier RMSE.
 
-Initialisation (the scene-level pose estimate of the first frame) is not built yet; the
-tracker is given its start poses.
+The tracker is given its start poses; :mod:`hsp.perception.initialize` estimates them
+from the first frame.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.perception.pointcloud import backproject, chromaticity
+from hsp.perception.pointcloud import backproject, chromaticity, palette_mask
 from hsp.sim.render import Mesh
 
 
@@ -73,8 +73,7 @@ class ObjectModel:
         self.face_rgb = mesh.face_rgb
 
     def colour_mask(self, rgb: np.ndarray, tol: float) -> np.ndarray:
-        c = chromaticity(rgb)
-        return np.min(np.linalg.norm(c[:, None, :] - self.palette[None], axis=-1), axis=1) <= tol
+        return palette_mask(rgb, self.palette, tol)
 
 
 def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig,
