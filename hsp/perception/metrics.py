@@ -8,19 +8,10 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import transform_points
+from hsp.geometry.symmetry import symmetry_rotations
 from hsp.tasks.spec import Symmetry
 
 AUC_MAX_M = 0.10
-
-
-def symmetry_rotations(symmetry: Symmetry) -> np.ndarray:
-    """Rotations ``(K, 3, 3)`` that map the object onto itself (finite symmetries)."""
-    if symmetry == "cube":
-        return Rotation.create_group("O").as_matrix()
-    k = {"none": 1, "z_2fold": 2, "z_4fold": 4, "z_6fold": 6}.get(symmetry)
-    if k is None:
-        raise ValueError(f"{symmetry!r} is continuous; use rotation_error_deg")
-    return Rotation.from_euler("z", (np.arange(k) * 2 * np.pi / k)[:, None]).as_matrix()
 
 
 def rotation_error_deg(q_est: np.ndarray, q_gt: np.ndarray, symmetry: Symmetry) -> np.ndarray:

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import inverse, transform_points
+from hsp.geometry.symmetry import symmetry_rotations
 from hsp.tasks.registry import Task
 from hsp.tasks.spec import PaintingSuccess, StackingSuccess, Symmetry, TireRemovalSuccess
 
@@ -48,12 +49,6 @@ def painting_success(tip: np.ndarray, paint: np.ndarray, surface: np.ndarray, sp
     return any(straight_stroke(local[s:e], spec.stroke_length, spec.stroke_straightness) for s, e in _runs(on_plane))
 
 
-def _z_symmetries(symmetry: Symmetry) -> np.ndarray:
-    """Rotations ``(K, 3, 3)`` about z that leave a resting object unchanged."""
-    k = {"none": 1, "z_2fold": 2, "z_4fold": 4, "cube": 4, "z_6fold": 6, "z_continuous": 360}[symmetry]
-    return Rotation.from_euler("z", (np.arange(k) * 2 * np.pi / k)[:, None]).as_matrix()
-
-
 def stacking_errors(final: np.ndarray, base: int, blocks: list[int], pattern: np.ndarray, symmetry: Symmetry) -> np.ndarray:
     """Distance (m) of each block centre from its place in the pattern, ``(B,)``.
 
@@ -62,7 +57,7 @@ def stacking_errors(final: np.ndarray, base: int, blocks: list[int], pattern: np
     """
     R_base = Rotation.from_quat(final[base, 3:]).as_matrix()
     rel = (final[blocks, :3] - final[base, :3]) @ R_base  # (B, 3) in the base frame
-    sym = _z_symmetries(symmetry)  # (K, 3, 3)
+    sym = symmetry_rotations(symmetry, resting=True)  # (K, 3, 3)
     rel_k = np.einsum("bi,kij->kbj", rel, sym)  # rel expressed in each symmetric frame
     err = np.linalg.norm(rel_k - pattern[None], axis=-1)  # (K, B)
     return err[np.argmin(err.max(axis=1))]

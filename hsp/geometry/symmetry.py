@@ -1,0 +1,31 @@
+"""Rotations that map a symmetric object onto itself (the ``symmetry`` of a task object)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+Z_FOLDS = {"none": 1, "z_2fold": 2, "z_4fold": 4, "z_6fold": 6}
+CONTINUOUS_STEPS = 360
+"""Sampling of a continuous symmetry about z where a finite set is needed."""
+
+
+def z_rotations(k: int) -> np.ndarray:
+    """The ``k`` rotations about z by multiples of 2π/k, ``(k, 3, 3)``."""
+    return Rotation.from_euler("z", (np.arange(k) * 2 * np.pi / k)[:, None]).as_matrix()
+
+
+def symmetry_rotations(symmetry: str, resting: bool = False) -> np.ndarray:
+    """Rotations ``(K, 3, 3)`` that leave the object unchanged.
+
+    ``resting``: only those about z that keep an object resting on its base (a cube keeps
+    4 of its 24; a continuous symmetry is sampled every degree). Otherwise the full finite
+    group (24 for a cube); a continuous symmetry has none and raises.
+    """
+    if symmetry in Z_FOLDS:
+        return z_rotations(Z_FOLDS[symmetry])
+    if symmetry == "cube":
+        return z_rotations(4) if resting else Rotation.create_group("O").as_matrix()
+    if symmetry == "z_continuous" and resting:
+        return z_rotations(CONTINUOUS_STEPS)
+    raise ValueError(f"{symmetry!r} has no finite set of symmetry rotations")
