@@ -17,7 +17,7 @@ import numpy as np
 from hsp.dataset.features import TrackStatus
 from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
-from hsp.recording.ground_truth import read_ground_truth
+from hsp.recording.ground_truth import GroundTruth, read_ground_truth
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
@@ -35,9 +35,9 @@ def list_recordings(recordings_dir: Path) -> list[Path]:
     return found
 
 
-def _ground_truth_episodes(task: Task, recordings: list[Path], fps: int) -> Iterator[EpisodePoses]:
-    for path in recordings:
-        gt = read_ground_truth(path)
+def _ground_truth_episodes(task: Task, recordings: list[Path], first: GroundTruth, fps: int) -> Iterator[EpisodePoses]:
+    for k, path in enumerate(recordings):
+        gt = first if k == 0 else read_ground_truth(path)
         if gt.objects != task.names:
             raise HspError(f"{path}: objects {gt.objects} do not match task {task.name!r} {task.names}")
         if int(gt.metadata.get("fps", fps)) != fps:
@@ -55,7 +55,7 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     first = read_ground_truth(recordings[0])
     fps = int(first.metadata.get("fps", 0)) or int(round(1e9 / np.median(np.diff(first.stamps_ns))))
     start = time.perf_counter()
-    counts = write_dataset(task, _ground_truth_episodes(task, recordings, fps), out_dir, fps)
+    counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)

@@ -49,11 +49,10 @@ class DepthNoiseConfig:
             raise HspError(f"depth_noise.min_range_m {self.min_range_m} >= max_range_m {self.max_range_m}")
 
 
-def _edges(z: np.ndarray, jump: float) -> np.ndarray:
-    """Pixels next to a depth step larger than ``jump`` (or next to no return)."""
-    kernel = np.ones((3, 3), np.uint8)
-    zmax = cv2.dilate(z, kernel)
-    zmin = cv2.erode(np.where(z > 0, z, np.float32(1e6)).astype(np.float32), kernel)
+def _edges(z: np.ndarray, zmax: np.ndarray, jump: float) -> np.ndarray:
+    """Pixels next to a depth step larger than ``jump`` (or next to no return); ``zmax``
+    is the 3×3 maximum of ``z``."""
+    zmin = cv2.erode(np.where(z > 0, z, np.float32(1e6)).astype(np.float32), np.ones((3, 3), np.uint8))
     return (zmax - zmin) > jump
 
 
@@ -86,11 +85,11 @@ def add_depth_noise(depth_m: np.ndarray, fx: float, cfg: DepthNoiseConfig, rng: 
     disparity += cv2.resize(coarse, (W // c * c + c, H // c * c + c), interpolation=cv2.INTER_LINEAR)[:H, :W]
     noisy = np.where(valid, fb / np.maximum(disparity, 1e-3), 0).astype(np.float32)
 
-    edges = _edges(z, cfg.edge_jump_m)
+    zmax = cv2.dilate(z, np.ones((3, 3), np.uint8))
+    edges = _edges(z, zmax, cfg.edge_jump_m)
     u = rng.random((H, W), dtype=np.float32)
     drop = edges & (u < cfg.edge_dropout)
     flying = edges & (u >= cfg.edge_dropout) & (u < cfg.edge_dropout + cfg.edge_flying)
-    zmax = cv2.dilate(z, np.ones((3, 3), np.uint8))
     mix = (u - np.float32(cfg.edge_dropout)) / np.float32(max(cfg.edge_flying, 1e-6))  # uniform on flying pixels
     noisy = np.where(flying, noisy * mix + zmax * (1 - mix), noisy)
 
