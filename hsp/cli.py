@@ -72,7 +72,6 @@ def record(
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
     """Run the scripted demonstrator on random layouts; one MCAP per episode."""
-    from hsp.fileio import write_json
     from hsp.recording.record import RecordConfig, camera_rig
     from hsp.recording.record import record as record_episodes
     from hsp.tasks.registry import load_task
@@ -92,13 +91,19 @@ def record(
         log.info("record %s: read %s; %d episodes, seed %d, %d fps, camera %s", task, t.path, cfg.episodes, cfg.seed,
                  cfg.fps, "on" if cfg.rig else "off")
         report = record_episodes(t, cfg, out_dir, force=force)
-        report_path = reports / task / "record.json"
-        write_json(report_path, report)
-        log.info("wrote %s and %s in %.1f s", out_dir, report_path, report["seconds"])
+        _write_report(reports / task / "record.json", report, out_dir)
         if report["demonstrator_success_rate"] < 1.0:
             log.warning("the demonstrator failed on %d of %d episodes", report["demonstrator_failures"], report["episodes"])
     except HspError as e:
         _fail(e)
+
+
+def _write_report(path: Path, report: dict, output: Path) -> None:
+    """The stage's flat-key JSON report, written atomically, and the closing log line."""
+    from hsp.fileio import write_json
+
+    write_json(path, report)
+    log.info("wrote %s and %s in %.1f s", output, path, report["seconds"])
 
 
 def _not_available(stage: str, issue: int) -> None:
@@ -115,7 +120,6 @@ def parse(
 ) -> None:
     """Turn recordings into 6D pose trajectories in a LeRobot v3.0 dataset."""
     from hsp.dataset.build import parse as parse_recordings
-    from hsp.fileio import write_json
     from hsp.tasks.registry import load_task
 
     try:
@@ -124,9 +128,7 @@ def parse(
         out_dir = out or Path("data/datasets") / task
         log.info("parse %s: read %s (poses from %s)", task, rec_dir, poses_from)
         report = parse_recordings(t, rec_dir, out_dir, poses_from=poses_from)
-        report_path = reports / task / "parse.json"
-        write_json(report_path, report)
-        log.info("wrote %s and %s in %.1f s", out_dir, report_path, report["seconds"])
+        _write_report(reports / task / "parse.json", report, out_dir)
     except HspError as e:
         _fail(e)
 
@@ -142,7 +144,6 @@ def label(
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
     """Infer tool, target and way-point per frame with Viterbi over the paper's priors."""
-    from hsp.fileio import write_json
     from hsp.labeling.priors import PriorConfig
     from hsp.labeling.stage import label_dataset
     from hsp.tasks.registry import load_task
@@ -157,9 +158,7 @@ def label(
         out_file = out or Path("data/labels") / f"{task}.parquet"
         log.info("label %s: read %s", task, ds)
         report = label_dataset(t, ds, out_file, cfg, recordings)
-        report_path = reports / task / "labels.json"
-        write_json(report_path, report)
-        log.info("wrote %s and %s in %.1f s", out_file, report_path, report["seconds"])
+        _write_report(reports / task / "labels.json", report, out_file)
     except HspError as e:
         _fail(e)
 
