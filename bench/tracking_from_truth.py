@@ -1,5 +1,5 @@
 """Benchmark: the frame-to-frame tracker on recorded episodes, started from the true
-first-frame poses (the initialiser is not built yet), against the ground truth.
+first-frame poses (tracking alone, without the initialiser), against the ground truth.
 
 Prints per task: frames/s (one process) and, over all objects and frames, the median and
 95th percentile translation error, the median symmetry-aware rotation error, the ADD-S
@@ -33,13 +33,14 @@ def main() -> None:
     for name in list_tasks():
         task = load_task(name)
         meshes = [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
+        models = [ObjectModel(m, TrackerConfig().model_points, i) for i, m in enumerate(meshes)]
         samples = [np.asarray(ObjectModel(m, 500).cloud.points) for m in meshes]
         te, re, adds, lost, frames, seconds = [], [], [], [], 0, 0.0
         for path in sorted((args.recordings / name).glob("*.mcap"))[: args.episodes]:
             rec, gt = read_recording(path), read_ground_truth(path)
             n = min(args.frames, len(rec.rgb))
             start = time.perf_counter()
-            poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam, meshes, gt.poses[0], TrackerConfig())
+            poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam, models, gt.poses[0], TrackerConfig())
             seconds += time.perf_counter() - start
             frames += n
             G = gt.poses[:n]

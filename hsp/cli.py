@@ -110,24 +110,53 @@ def _not_available(stage: str, issue: int) -> None:
     _fail(HspError(f"`hsp {stage}` is not available yet (issue {issue})"))
 
 
+def _intrinsics(text: Optional[str]) -> Optional[tuple[float, float, float, float]]:
+    if text is None:
+        return None
+    try:
+        fx, fy, cx, cy = (float(v) for v in text.split(","))
+    except ValueError:
+        raise HspError(f"--intrinsics {text!r}: expected four numbers fx,fy,cx,cy (pixels)") from None
+    return fx, fy, cx, cy
+
+
 @app.command()
 def parse(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
     recordings: Optional[Path] = typer.Option(None, help="recordings directory [data/recordings/TASK]"),
     out: Optional[Path] = typer.Option(None, help="dataset directory [data/datasets/TASK]"),
     poses_from: str = typer.Option("tracker", help="tracker | ground-truth (the ablation without perception error)"),
+    workers: Optional[int] = typer.Option(None, help="episodes tracked in parallel processes [params: parse.workers]"),
+    color_topic: Optional[str] = typer.Option(None, help="colour Image topic, if not the RealSense driver's"),
+    depth_topic: Optional[str] = typer.Option(None, help="depth Image topic, registered to colour"),
+    info_topic: Optional[str] = typer.Option(None, help="colour CameraInfo topic"),
+    intrinsics: Optional[str] = typer.Option(None, help="fx,fy,cx,cy in pixels, for recordings without CameraInfo"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
+    params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
-    """Turn recordings into 6D pose trajectories in a LeRobot v3.0 dataset."""
+    """Track every object in the recordings and write the 6D poses as a LeRobot v3.0 dataset."""
     from hsp.dataset.build import parse as parse_recordings
+    from hsp.perception.tracker import TrackerConfig
+    from hsp.recording.reader import ReadOptions
     from hsp.tasks.registry import load_task
 
     try:
+        params = load_params(params_file)
         t = load_task(task)
         rec_dir = recordings or Path("data/recordings") / task
         out_dir = out or Path("data/datasets") / task
-        log.info("parse %s: read %s (poses from %s)", task, rec_dir, poses_from)
-        report = parse_recordings(t, rec_dir, out_dir, poses_from=poses_from)
+        options = ReadOptions(color_topic, depth_topic, info_topic, _intrinsics(intrinsics))
+        n_workers = workers if workers is not None else int(param(params, "parse.workers", 1))
+        cfg = section(params, "tracker", TrackerConfig)
+        log.info("parse %s: read %s (poses from %s, %d workers)", task, rec_dir, poses_from, n_workers)
+        report, tracking = parse_recordings(t, rec_dir, out_dir, poses_from, n_workers, options, cfg,
+                                            int(param(params, "seed", 0)))
+        if tracking is not None:
+            from hsp.fileio import write_json
+
+            write_json(reports / task / "tracking.json", tracking)
+            log.info("tracking: %s", ", ".join(f"{k} {v:.4g}" for k, v in tracking.items()
+                                                 if not k.startswith("objects.") and isinstance(v, float)))
         _write_report(reports / task / "parse.json", report, out_dir)
     except HspError as e:
         _fail(e)

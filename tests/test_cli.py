@@ -40,7 +40,8 @@ def test_unknown_task_is_a_one_line_error(tmp_path):
 
 
 def test_parse_ground_truth_ablation(tmp_path):
-    """record → parse --poses-from ground-truth → a dataset and a report; the tracker is not faked."""
+    """record → parse --poses-from ground-truth → a dataset and a report; the tracker, with no
+    images to track, fails and writes nothing."""
     rec, ds, reports = tmp_path / "rec", tmp_path / "ds", tmp_path / "reports"
     assert runner.invoke(app, ["record", "painting", "--episodes", "1", "--out", str(rec), "--no-camera", "--workers", "1",
                                "--reports", str(reports)]).exit_code == 0
@@ -50,7 +51,7 @@ def test_parse_ground_truth_ablation(tmp_path):
     assert json.loads((reports / "painting" / "parse.json").read_text())["episodes"] == 1
     assert (ds / "meta" / "info.json").is_file()
     tracked = runner.invoke(app, ["parse", "painting", "--recordings", str(rec), "--out", str(tmp_path / "ds2")])
-    assert tracked.exit_code == 1 and "not available yet" in tracked.output
+    assert tracked.exit_code == 1 and "no colour image topic" in tracked.output
     assert not (tmp_path / "ds2").exists()
 
     labels = tmp_path / "labels.parquet"

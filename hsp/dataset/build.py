@@ -1,6 +1,6 @@
 """The ``parse`` stage: recordings → 6D pose trajectories → LeRobot dataset.
 
-Poses come from the tracker (``hsp.perception``, not built yet) or, for the ablation that
+Poses come from the tracker (:mod:`hsp.perception.episode`) or, for the ablation that
 separates perception error from learning error, from the recordings' ground truth
 (``--poses-from ground-truth``).
 """
@@ -8,17 +8,26 @@ separates perception error from learning error, from the recordings' ground trut
 from __future__ import annotations
 
 import logging
+import multiprocessing
+import os
 import time
 from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rich.progress import Progress
 
 from hsp.dataset.features import TrackStatus
 from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
+from hsp.perception.episode import object_models, track_recording
+from hsp.perception.metrics import auc, episode_errors
+from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, read_ground_truth
-from hsp.tasks.registry import Task
+from hsp.recording.reader import ReadOptions, read_recording
+from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
 POSE_SOURCES = ("tracker", "ground-truth")
@@ -45,18 +54,129 @@ def _ground_truth_episodes(task: Task, recordings: list[Path], first: GroundTrut
         yield EpisodePoses(str(path), gt.poses, np.full(gt.poses.shape[:2], TrackStatus.OK, np.int64))
 
 
-def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tracker") -> dict[str, float | int | str]:
-    """Build the dataset of ``task`` from every recording in ``recordings_dir``."""
+@dataclass(frozen=True)
+class TrackJob:
+    task: str
+    pipeline_dir: Path
+    path: Path
+    options: ReadOptions
+    cfg: TrackerConfig
+    seed: int
+
+
+@dataclass
+class TrackOutcome:
+    episode: EpisodePoses
+    frames: int
+    seconds: float
+    errors: dict[str, np.ndarray] | None
+    """Per-frame errors against the recorded truth (``None`` without ground truth)."""
+
+
+def _track_one(job: TrackJob) -> TrackOutcome:
+    """Track one recording; then, separately, score it against its ground truth if any."""
+    task = load_task(job.task, job.pipeline_dir)
+    rec = read_recording(job.path, job.options)
+    models = object_models(task, job.cfg, job.seed)
+    tracked = track_recording(task, rec, models, job.cfg)
+    frames = len(rec.rgb)
+    del rec
+    errors = None
+    try:
+        gt = read_ground_truth(job.path)
+    except HspError:
+        gt = None
+    if gt is not None and gt.objects == task.names and len(gt.poses) == frames:
+        samples = [np.asarray(m.cloud.points)[::3] for m in models]
+        errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses, gt.poses)
+    return TrackOutcome(EpisodePoses(str(job.path), tracked.poses, tracked.status), frames, tracked.seconds, errors)
+
+
+def _tracked_episodes(jobs: list[TrackJob], workers: int, outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
+    """Episodes in order, tracked in ``workers`` processes (one Open3D thread each)."""
+    with Progress() as progress:
+        bar = progress.add_task(f"track {jobs[0].task}", total=len(jobs))
+        if workers == 1:
+            results: Iterator[TrackOutcome] = map(_track_one, jobs)
+            pool = None
+        else:
+            saved = os.environ.get("OMP_NUM_THREADS")
+            os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the spawned workers before they import Open3D
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+            if saved is None:
+                del os.environ["OMP_NUM_THREADS"]
+            else:
+                os.environ["OMP_NUM_THREADS"] = saved
+            results = pool.map(_track_one, jobs)
+        try:
+            for outcome in results:
+                outcomes.append(outcome)
+                progress.advance(bar)
+                yield outcome.episode
+        finally:
+            if pool is not None:
+                pool.shutdown(cancel_futures=True)
+
+
+def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall_seconds: float) -> dict[str, float | int | str]:
+    """``reports/TASK/tracking.json``: errors over all frames and objects (lost ones included),
+    per object too, and the tracking rate."""
+    frames = sum(o.frames for o in outcomes)
+    status = np.concatenate([o.episode.status for o in outcomes])
+    report: dict[str, float | int | str] = {
+        "episodes": len(outcomes),
+        "frames": frames,
+        "objects": len(task.objects),
+        "lost_fraction": float(np.mean(status == TrackStatus.LOST)),
+        "suspect_fraction": float(np.mean(status == TrackStatus.SUSPECT)),
+        "frames_per_second": frames / wall_seconds,
+        "frames_per_second_per_process": frames / sum(o.seconds for o in outcomes),
+        "workers": workers,
+    }
+    scored = [o.errors for o in outcomes if o.errors is not None]
+    report["episodes_with_ground_truth"] = len(scored)
+    if scored:
+        err = {k: np.concatenate([e[k] for e in scored]) for k in scored[0]}
+        report.update({
+            "translation_error_mm_median": float(np.median(err["translation_mm"])),
+            "translation_error_mm_p95": float(np.percentile(err["translation_mm"], 95)),
+            "rotation_error_deg_median": float(np.median(err["rotation_deg"])),
+            "rotation_error_deg_p95": float(np.percentile(err["rotation_deg"], 95)),
+            "adds_auc": auc(err["adds_m"]),
+        })
+        for i, name in enumerate(task.names):
+            report[f"objects.{name}.translation_error_mm_median"] = float(np.median(err["translation_mm"][:, i]))
+            report[f"objects.{name}.translation_error_mm_p95"] = float(np.percentile(err["translation_mm"][:, i], 95))
+            report[f"objects.{name}.rotation_error_deg_median"] = float(np.median(err["rotation_deg"][:, i]))
+            report[f"objects.{name}.lost_fraction"] = float(np.mean(status[:, i] == TrackStatus.LOST))
+    return report
+
+
+def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tracker", workers: int = 1,
+          options: ReadOptions = ReadOptions(), cfg: TrackerConfig = TrackerConfig(),
+          seed: int = 0) -> tuple[dict[str, float | int | str], dict[str, float | int | str] | None]:
+    """Build the dataset of ``task`` from every recording in ``recordings_dir``; returns the
+    parse report and, for tracked poses, the tracking report."""
     if poses_from not in POSE_SOURCES:
         raise HspError(f"--poses-from {poses_from!r}: choose one of {', '.join(POSE_SOURCES)}")
-    if poses_from == "tracker":
-        raise HspError("pose tracking is not available yet (issue 4); use --poses-from ground-truth for the ablation")
     recordings = list_recordings(recordings_dir)
-    first = read_ground_truth(recordings[0])
-    fps = int(first.metadata.get("fps", 0)) or int(round(1e9 / np.median(np.diff(first.stamps_ns))))
     start = time.perf_counter()
-    counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
+    tracking = None
+    if poses_from == "ground-truth":
+        first = read_ground_truth(recordings[0])
+        fps = int(first.metadata.get("fps", 0)) or int(round(1e9 / np.median(np.diff(first.stamps_ns))))
+        counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
+    else:
+        object_models(task, cfg, seed)  # a missing mesh fails here, before any work
+        stamps = read_recording(recordings[0], options).stamps_ns
+        if len(stamps) < 2:
+            raise HspError(f"{recordings[0]}: {len(stamps)} usable frame(s); an episode needs at least 2")
+        fps = int(round(1e9 / np.median(np.diff(stamps))))
+        jobs = [TrackJob(task.name, task.objects_dir.parent, p, options, cfg, seed) for p in recordings]
+        outcomes: list[TrackOutcome] = []
+        counts = write_dataset(task, _tracked_episodes(jobs, workers, outcomes), out_dir, fps)
+        tracking = tracking_report(task, outcomes, workers, time.perf_counter() - start)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)
-    return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds}
+    return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds}, tracking

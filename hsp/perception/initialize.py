@@ -56,9 +56,12 @@ def _anchor(face_centres: np.ndarray, face_rgb: np.ndarray, palette: np.ndarray,
 
 
 def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], camera: np.ndarray,
-               cfg: TrackerConfig = TrackerConfig()) -> tuple[np.ndarray, np.ndarray]:
-    """World poses ``(n, 7)`` at the first frame and whether each was found ``(n,)``;
-    ``camera (3,)`` is the camera's world position (for back-face culling)."""
+               cfg: TrackerConfig = TrackerConfig(), only: list[int] | None = None,
+               first_frame: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """World poses ``(n, 7)`` and whether each was found ``(n,)``, for every object or the
+    ``only`` ones; ``camera (3,)`` is the camera's world position (for back-face culling).
+    In the first frame, objects placed on the table rest there upright; later (re-detection)
+    any object may be anywhere, upright or pointing down."""
     n = len(models)
     poses = np.tile([0, 0, 0, 0, 0, 0, 1.0], (n, 1))
     found = np.zeros(n, bool)
@@ -66,12 +69,14 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
     yaws = np.arange(YAW_STEPS) * 2 * np.pi / YAW_STEPS
     palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
     for i, (obj, model) in enumerate(zip(task.objects, models)):
+        if only is not None and i not in only:
+            continue
         mask = np.flatnonzero(palette_mask(cols, palettes[i], cfg.colour_tolerance))
         anchor = _anchor(model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
         groups = _clusters(pts[mask])
         key = palettes[i].tobytes()
         used = taken.setdefault(key, set())
-        rest_height = mesh_extent(task.mesh(i))[1] if i > 0 and obj.place.support == "table" else None
+        rest_height = mesh_extent(task.mesh(i))[1] if first_frame and i > 0 and obj.place.support == "table" else None
         lifts = [0.0] if rest_height is not None else [-0.04, -0.02, 0.0, 0.02, 0.04]  # visible part vs anchor, in the air
         best = (-1, None, -1)
         for g, idx in enumerate(groups[: MAX_CLUSTERS + len(used)]):

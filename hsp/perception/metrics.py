@@ -47,3 +47,12 @@ def auc(errors_m: np.ndarray, max_m: float = AUC_MAX_M) -> float:
     thresholds = np.linspace(0, max_m, 1001)
     accuracy = np.searchsorted(e, thresholds, side="right") / e.size
     return float(np.trapezoid(accuracy, thresholds) / max_m * 100.0)
+
+
+def episode_errors(symmetries: list[Symmetry], samples: list[np.ndarray], poses: np.ndarray, truth: np.ndarray) -> dict[str, np.ndarray]:
+    """Per frame and object ``(T, n)``: translation error (mm), symmetry-aware rotation
+    error (deg) and ADD-S (m) of tracked ``poses`` against ``truth`` (both ``(T, n, 7)``)."""
+    te = np.linalg.norm(poses[..., :3] - truth[..., :3], axis=-1) * 1000.0
+    re = np.stack([rotation_error_deg(poses[:, i, 3:], truth[:, i, 3:], s) for i, s in enumerate(symmetries)], axis=1)
+    adds = np.stack([add_s(samples[i], poses[:, i], truth[:, i]) for i in range(len(symmetries))], axis=1)
+    return {"translation_mm": te, "rotation_deg": re, "adds_m": adds}

@@ -13,6 +13,7 @@ from the first frame.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +44,8 @@ class TrackerConfig:
     min_points: int = 30
     suspect_rmse_m: float = 0.004
     model_points: int = 1500
+    redetect_after: int = 5
+    """Frames an object stays lost before a global search, and between searches."""
 
 
 def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -100,13 +103,15 @@ def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig,
 
 
 def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], pred: np.ndarray,
-                  cfg: TrackerConfig) -> np.ndarray:
+                  cfg: TrackerConfig, active: np.ndarray | None = None) -> np.ndarray:
     """Owner of each scene point ``(N,)``: the object whose predicted surface is nearest,
     among those whose crop and colour palette admit the point; −1 for none. Occluding and
     touching objects (a hand on a block, nuts on a wheel) thus never share points."""
     best = np.full(len(pts), np.inf)
     owner = np.full(len(pts), -1)
     for i, model in enumerate(models):
+        if active is not None and not active[i]:
+            continue
         cand = np.flatnonzero(np.linalg.norm(pts - pred[i, :3], axis=1) < model.radius + cfg.crop_margin_m)
         cand = cand[model.colour_mask(cols[cand], cfg.colour_tolerance)]
         if cand.size == 0:
@@ -126,38 +131,65 @@ def predict(prev: np.ndarray, dx: np.ndarray, drot: np.ndarray, alpha: float) ->
     return np.concatenate([prev[:, :3] + alpha * dx, q], axis=1)
 
 
-def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, meshes: list[Mesh],
-          start: np.ndarray, cfg: TrackerConfig = TrackerConfig()) -> tuple[np.ndarray, np.ndarray]:
+Redetect = Callable[[np.ndarray, np.ndarray, list[int]], tuple[np.ndarray, np.ndarray]]
+"""``(points, colours, object indices) → (poses (k, 7), found (k,))``: a global search for
+lost objects among the scene points no tracked object claims."""
+
+
+def scene_points(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
+                 cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """World points and colours of one frame, table removed."""
+    pts, cols = backproject(depth, rgb, K, T_world_cam, cfg.stride)
+    keep = pts[:, 2] > cfg.table_clearance_m
+    return pts[keep], cols[keep]
+
+
+def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, models: list[ObjectModel],
+          start: np.ndarray, cfg: TrackerConfig = TrackerConfig(), found: np.ndarray | None = None,
+          redetect: Redetect | None = None, progress: Callable[[], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Poses ``(T, n, 7)`` and status ``(T, n)`` over frames ``rgb (T, H, W, 3)``,
-    ``depth (T, H, W)``, starting from world poses ``start (n, 7)`` at frame 0."""
-    models = [ObjectModel(m, cfg.model_points) for m in meshes]
-    T_frames, n = len(depth), len(meshes)
+    ``depth (T, H, W)``, from world poses ``start (n, 7)`` at frame 0 (``found (n,)``
+    says which of them are real). A lost object is searched for locally, from its last good
+    pose, in every frame; once lost for ``cfg.redetect_after`` frames it is also searched
+    for globally with ``redetect``, every ``cfg.redetect_after`` frames. A lost object's
+    stored pose is its last good one (or prediction), marked LOST."""
+    T_frames, n = len(depth), len(models)
     poses = np.zeros((T_frames, n, 7))
     status = np.full((T_frames, n), TrackStatus.OK, np.int64)
     prev = start.copy()
+    known = np.ones(n, bool) if found is None else found.copy()
+    lost_for = np.where(known, 0, 1)
     dx, drot = np.zeros((n, 3)), np.zeros((n, 3))
     for t in range(T_frames):
-        pts, cols = backproject(depth[t], rgb[t], K, T_world_cam, cfg.stride)
-        keep = pts[:, 2] > cfg.table_clearance_m
-        pts, cols = pts[keep], cols[keep]
+        pts, cols = scene_points(rgb[t], depth[t], K, T_world_cam, cfg)
         pred = predict(prev, dx, drot, cfg.damping)
-        owner = assign_points(pts, cols, models, pred, cfg)
-        for i, model in enumerate(models):
+        owner = assign_points(pts, cols, models, pred, cfg, known)
+        for i in np.flatnonzero(known):
             sel = np.flatnonzero(owner == i)
             if sel.size < cfg.min_points:
                 poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
                 continue
             local = (pts[sel] - pred[i, :3]) @ pose_to_matrix(pred[i])[:3, :3]
-            corr, rmse, inliers = _icp(model, local, cfg)  # no culling here: it lost objects mid-turn
+            corr, rmse, inliers = _icp(models[i], local, cfg)  # no culling here: it lost objects mid-turn
             poses[t, i] = compose(pred[i], pose_from_matrix(np.linalg.inv(corr)))
             if inliers < cfg.min_points:
                 status[t, i] = TrackStatus.LOST
             elif rmse > cfg.suspect_rmse_m:
                 status[t, i] = TrackStatus.SUSPECT
+        poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
+        search = np.flatnonzero(lost_for >= cfg.redetect_after)
+        if redetect is not None and search.size and lost_for[search].min() % cfg.redetect_after == 0:
+            found_poses, ok = redetect(pts[owner < 0], cols[owner < 0], search.tolist())
+            for i, p in zip(search[ok], found_poses[ok]):
+                poses[t, i], status[t, i], known[i] = p, TrackStatus.SUSPECT, True
         good = status[t] != TrackStatus.LOST
         if t > 0:
-            dx[good] = poses[t, good, :3] - prev[good, :3]
-            drot[good] = (Rotation.from_quat(poses[t, good, 3:]) * Rotation.from_quat(prev[good, 3:]).inv()).as_rotvec()
+            moved = good & (lost_for == 0)  # a velocity needs two good frames in a row
+            dx[moved] = poses[t, moved, :3] - prev[moved, :3]
+            drot[moved] = (Rotation.from_quat(poses[t, moved, 3:]) * Rotation.from_quat(prev[moved, 3:]).inv()).as_rotvec()
         dx[~good], drot[~good] = 0.0, 0.0
         prev[good] = poses[t, good]
+        lost_for = np.where(good, 0, lost_for + 1)
+        if progress is not None:
+            progress()
     return poses, status

@@ -22,7 +22,8 @@ def recordings(tasks, tmp_path_factory):
 def test_ground_truth_dataset_opens_with_lerobot_and_matches_recordings(tasks, recordings, tmp_path):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    report = parse(tasks["stacking-1"], recordings, tmp_path / "ds", poses_from="ground-truth")
+    report, tracking = parse(tasks["stacking-1"], recordings, tmp_path / "ds", poses_from="ground-truth")
+    assert tracking is None
     gts = [read_ground_truth(p) for p in sorted(recordings.glob("*.mcap"))]
     ds = LeRobotDataset("hsp/stacking-1", root=tmp_path / "ds")
     assert ds.num_episodes == 3 == report["episodes"]
@@ -52,9 +53,10 @@ def test_task_mismatch_writes_nothing(tasks, recordings, tmp_path):
     assert not (tmp_path / "ds").exists() and not any(tmp_path.iterdir())
 
 
-def test_tracker_source_is_not_faked(tasks, recordings, tmp_path):
-    with pytest.raises(HspError, match="not available yet"):
+def test_tracking_recordings_without_images_is_an_error_naming_the_file(tasks, recordings, tmp_path):
+    with pytest.raises(HspError, match="episode_000000.mcap: no colour image topic"):
         parse(tasks["stacking-1"], recordings, tmp_path / "ds")
+    assert not any(tmp_path.iterdir())
 
 
 def _episode(task, T=5, seed=0):

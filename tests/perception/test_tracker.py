@@ -28,7 +28,8 @@ def episode(tasks, tmp_path_factory):
 def test_tracking_from_the_first_pose_stays_within_millimetres(episode):
     task, rec, gt, meshes = episode
     n = 60
-    poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam, meshes, gt.poses[0], TrackerConfig())
+    models = [ObjectModel(m, 1500) for m in meshes]
+    poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam, models, gt.poses[0], TrackerConfig())
     err_mm = np.linalg.norm(poses[:, :, :3] - gt.poses[:n, :, :3], axis=-1) * 1000
     assert np.median(err_mm) < 3.0, np.median(err_mm, axis=0)
     assert np.percentile(err_mm, 95) < 10.0
