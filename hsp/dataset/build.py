@@ -23,7 +23,7 @@ from hsp.dataset.features import TrackStatus
 from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
 from hsp.perception.episode import object_models, track_recording
-from hsp.perception.metrics import auc, episode_errors
+from hsp.perception.metrics import auc, episode_errors, match_identical
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, read_ground_truth
 from hsp.recording.reader import ReadOptions, read_recording
@@ -73,6 +73,14 @@ class TrackOutcome:
     """Per-frame errors against the recorded truth (``None`` without ground truth)."""
 
 
+def identical_groups(task: Task) -> list[list[int]]:
+    """Indices of objects that share mesh and label, in groups of two or more."""
+    groups: dict[tuple[str, str], list[int]] = {}
+    for i, o in enumerate(task.objects):
+        groups.setdefault((o.mesh, o.label), []).append(i)
+    return [g for g in groups.values() if len(g) > 1]
+
+
 def _track_one(job: TrackJob) -> TrackOutcome:
     """Track one recording; then, separately, score it against its ground truth if any."""
     task = load_task(job.task, job.pipeline_dir)
@@ -88,7 +96,8 @@ def _track_one(job: TrackJob) -> TrackOutcome:
         gt = None
     if gt is not None and gt.objects == task.names and len(gt.poses) == frames:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
-        errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses, gt.poses)
+        order = match_identical(identical_groups(task), tracked.poses, gt.poses)
+        errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses[:, order], gt.poses)
     return TrackOutcome(EpisodePoses(str(job.path), tracked.poses, tracked.status), frames, tracked.seconds, errors)
 
 

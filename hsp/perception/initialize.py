@@ -16,7 +16,7 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.perception.pointcloud import palette_mask
+from hsp.perception.pointcloud import SHADE_RANGE, palette_mask
 from hsp.perception.tracker import ObjectModel, TrackerConfig, _icp
 from hsp.tasks.layout import mesh_extent
 from hsp.tasks.registry import Task
@@ -24,6 +24,7 @@ from hsp.tasks.registry import Task
 YAW_STEPS = 16
 CLUSTER_EPS_M = 0.012
 MAX_CLUSTERS = 3
+MIN_DISTINCTIVE_AREA = 0.2
 
 
 def _clusters(points: np.ndarray) -> list[np.ndarray]:
@@ -36,15 +37,24 @@ def _clusters(points: np.ndarray) -> list[np.ndarray]:
     return sorted(groups, key=len, reverse=True)
 
 
+def _extent(points: np.ndarray) -> float:
+    """Largest side of the axis-aligned box around ``points``."""
+    return float(np.max(points.max(axis=0) - points.min(axis=0)))
+
+
 def distinctive_palettes(task: Task, models: list[ObjectModel], tol: float) -> list[np.ndarray]:
     """Each object's colours that no differently labelled object of the task has (the
-    brush's brown, not its grey ferrule, which the canvas shares); all colours if none."""
+    brush's brown, not its grey ferrule, which the canvas shares); all its colours if those
+    cover less than ``MIN_DISTINCTIVE_AREA`` of its surface (a nut's small paint mark)."""
     out = []
+    lo, hi = SHADE_RANGE  # two colours are alike if some shading of each gives the same pixel
     for i, model in enumerate(models):
         others = [m.palette for j, m in enumerate(models) if task.labels[j] != task.labels[i]]
         other = np.concatenate(others) if others else np.zeros((0, 3))
-        keep = [c for c in model.palette if other.size == 0 or np.min(np.linalg.norm(other - c, axis=1)) > tol]
-        out.append(np.array(keep) if keep else model.palette)
+        shared = palette_mask(model.palette, other, tol, (lo / hi, hi / lo)) if other.size else np.zeros(len(model.palette), bool)
+        own = model.palette[~shared]
+        area = model.face_area[palette_mask(model.face_rgb, own, tol, (1.0, 1.0))].sum() if len(own) else 0.0
+        out.append(own if area >= MIN_DISTINCTIVE_AREA * model.face_area.sum() else model.palette)
     return out
 
 
@@ -79,7 +89,11 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
         rest_height = mesh_extent(task.mesh(i))[1] if first_frame and i > 0 and obj.place.support == "table" else None
         lifts = [0.0] if rest_height is not None else [-0.04, -0.02, 0.0, 0.02, 0.04]  # visible part vs anchor, in the air
         best = (-1, None, -1)
-        for g, idx in enumerate(groups[: MAX_CLUSTERS + len(used)]):
+        wide = max(0.03, model.radius / 3)  # a wheel's visible part is centred centimetres off its own centre
+        coarse = TrackerConfig(gates_m=(wide, 0.015, 0.006), tukey_m=max(cfg.tukey_m, wide if wide > 0.03 else 0.0))
+        fits = [g for g, idx in enumerate(groups) if _extent(pts[mask[idx]]) <= 2 * (model.radius + cfg.crop_margin_m)]
+        for g in (fits or list(range(len(groups))))[: MAX_CLUSTERS + len(used)]:
+            idx = groups[g]
             if g in used:
                 continue
             seen = pts[mask[idx]].mean(axis=0)
@@ -95,7 +109,7 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
                 guess = np.concatenate([centre, R.as_quat()])
                 M = pose_to_matrix(guess)[:3, :3]
                 local = (near - guess[:3]) @ M
-                corr, rmse, inliers = _icp(model, local, TrackerConfig(gates_m=(0.03, 0.015, 0.006)), (camera - guess[:3]) @ M)
+                corr, rmse, inliers = _icp(model, local, coarse, (camera - guess[:3]) @ M)
                 if inliers > best[0]:
                     best = (inliers, compose(guess, pose_from_matrix(np.linalg.inv(corr))), g)
         if best[1] is not None and best[0] >= cfg.min_points:

@@ -4,6 +4,7 @@ and its area under the accuracy curve (0–10 cm, ×100, as se(3)-TrackNet's VOC
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -47,6 +48,19 @@ def auc(errors_m: np.ndarray, max_m: float = AUC_MAX_M) -> float:
     thresholds = np.linspace(0, max_m, 1001)
     accuracy = np.searchsorted(e, thresholds, side="right") / e.size
     return float(np.trapezoid(accuracy, thresholds) / max_m * 100.0)
+
+
+def match_identical(groups: list[list[int]], poses: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Object order ``(n,)`` that pairs each tracked object with the true one, within each
+    group of identical objects (same mesh and label: four nuts), by least mean distance over
+    the episode. Their names are interchangeable, so a tracker cannot be asked to tell them
+    apart; it must only keep each one's identity through the episode."""
+    order = np.arange(poses.shape[1])
+    for g in groups:
+        cost = np.linalg.norm(poses[:, g, None, :3] - truth[:, None, g, :3], axis=-1).mean(axis=0)  # (est, true)
+        est, true = linear_sum_assignment(cost)
+        order[np.asarray(g)[true]] = np.asarray(g)[est]
+    return order
 
 
 def episode_errors(symmetries: list[Symmetry], samples: list[np.ndarray], poses: np.ndarray, truth: np.ndarray) -> dict[str, np.ndarray]:

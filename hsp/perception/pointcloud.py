@@ -24,8 +24,15 @@ def chromaticity(rgb: np.ndarray) -> np.ndarray:
     return rgb / np.maximum(rgb.sum(axis=-1, keepdims=True), 1e-6)
 
 
-def palette_mask(rgb: np.ndarray, palette: np.ndarray, tol: float) -> np.ndarray:
-    """Which colours ``(N, 3)`` lie within chromaticity distance ``tol`` of a palette
-    colour ``(K, 3)`` (palette given as chromaticities), ``(N,)`` bool."""
-    c = chromaticity(rgb)
-    return np.min(np.linalg.norm(c[:, None, :] - palette[None], axis=-1), axis=1) <= tol
+SHADE_RANGE = (0.3, 1.2)
+"""Brightness of a lit surface relative to its albedo, darkest to brightest face: shading
+changes brightness, not chromaticity, but within bounds (black is never lit to steel)."""
+
+
+def palette_mask(rgb: np.ndarray, palette: np.ndarray, tol: float, shade: tuple[float, float] = SHADE_RANGE) -> np.ndarray:
+    """Which colours ``(N, 3)`` could show a palette colour ``(K, 3)`` (albedo, same units)
+    under some shading: chromaticity within ``tol`` and brightness within ``shade`` times
+    the palette colour's, ``(N,)`` bool."""
+    near = np.linalg.norm(chromaticity(rgb)[:, None, :] - chromaticity(palette)[None], axis=-1) <= tol
+    ratio = rgb.sum(axis=-1)[:, None] / np.maximum(palette.sum(axis=-1)[None], 1e-6)
+    return np.any(near & (ratio >= shade[0]) & (ratio <= shade[1]), axis=1)

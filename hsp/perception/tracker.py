@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.perception.pointcloud import backproject, chromaticity, palette_mask
+from hsp.perception.pointcloud import backproject, palette_mask
 from hsp.sim.render import Mesh
 
 
@@ -71,8 +71,11 @@ class ObjectModel:
         self.cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
         self.cloud.normals = o3d.utility.Vector3dVector(normals)
         self.radius = float(np.max(np.linalg.norm(mesh.vertices, axis=1)))
-        self.palette = np.unique(np.round(chromaticity(mesh.face_rgb), 3), axis=0)
-        self.face_centres = mesh.vertices[mesh.triangles].mean(axis=1)
+        self.palette = np.unique(np.round(mesh.face_rgb, 3), axis=0)
+        """Albedo colours (K, 3) of the model's faces."""
+        tri = mesh.vertices[mesh.triangles]
+        self.face_centres = tri.mean(axis=1)
+        self.face_area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
         self.face_rgb = mesh.face_rgb
 
     def colour_mask(self, rgb: np.ndarray, tol: float) -> np.ndarray:
