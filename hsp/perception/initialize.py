@@ -3,9 +3,10 @@
 Each object is looked for among the points that match its colour palette, grouped into
 clusters (DBSCAN). From each of the largest clusters, pose hypotheses are refined by the
 tracker's ICP: objects standing on the table keep their resting attitude (the layout is
-physically consistent: upright, at the height where the model touches z = 0) and try a
-grid of yaw angles; the end-effector is assumed to point down and tries the same grid.
-The hypothesis with the most inliers at the finest gate wins; identical objects (same
+physically consistent: upright, at the height where the model touches z = 0; objects on
+other objects upright too) and try a grid of yaw angles; the end-effector is assumed to point down and tries the same grid.
+The hypothesis wins that puts the most scene points on the model's surface where the
+model has their colour, less the nearby points of its colours that it leaves unexplained; identical objects (same
 palette) take distinct clusters.
 """
 
@@ -16,7 +17,8 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.perception.pointcloud import SHADE_RANGE, palette_mask
+from hsp.geometry.symmetry import Z_FOLDS
+from hsp.perception.pointcloud import SHADE_RANGE, colour_match, palette_mask
 from hsp.perception.tracker import ObjectModel, TrackerConfig, _icp
 from hsp.tasks.layout import mesh_extent
 from hsp.tasks.registry import Task
@@ -25,6 +27,9 @@ YAW_STEPS = 16
 CLUSTER_EPS_M = 0.012
 MAX_CLUSTERS = 3
 MIN_DISTINCTIVE_AREA = 0.2
+AIR_SHIFTS = [np.array(v) for v in ([0, 0, -0.04], [0, 0, -0.02], [0, 0, 0], [0, 0, 0.02], [0, 0, 0.04],
+                                    [0.02, 0, 0], [-0.02, 0, 0], [0, 0.02, 0], [0, -0.02, 0])]
+"""Where an object in the air may sit relative to its visible part's centre (m)."""
 
 
 def _clusters(points: np.ndarray) -> list[np.ndarray]:
@@ -35,6 +40,43 @@ def _clusters(points: np.ndarray) -> list[np.ndarray]:
     labels = np.asarray(pcd.cluster_dbscan(eps=CLUSTER_EPS_M, min_points=8))
     groups = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)] if labels.size else []
     return sorted(groups, key=len, reverse=True)
+
+
+def _yaw_grid(symmetry: str) -> np.ndarray:
+    """Yaw hypotheses: ``YAW_STEPS`` per turn, over one period of the object's symmetry about z."""
+    period = {"z_continuous": 0.0, "cube": 4, **Z_FOLDS}.get(symmetry, 1)
+    if not period:
+        return np.zeros(1)
+    steps = max(1, -(-YAW_STEPS // period))
+    return np.arange(steps) * 2 * np.pi / (period * steps)
+
+
+def _agreement(model: ObjectModel, local: np.ndarray, cols: np.ndarray, cfg: TrackerConfig) -> int:
+    """Scene points (in the object frame) that lie on the model's surface, within the finest
+    tracking gate, where the model has their colour: a flipped brush puts its bristles where the
+    handle is seen and scores low, though its shape fits as well."""
+    d, j = model.tree.query(local, distance_upper_bound=cfg.gates_m[0])
+    on = np.flatnonzero(np.isfinite(d))
+    return int(np.count_nonzero(colour_match(cols[on], model.sample_rgb[j[on]], cfg.colour_tolerance)))
+
+
+def _centre_of_colour(points: np.ndarray, start: np.ndarray, radius: float, steps: int = 3) -> np.ndarray:
+    """Mean-shift of ``start`` over the object's colour ``points`` within ``radius``: the
+    centre of the whole visible object when DBSCAN cut it in two (a bucket's rim and inside)."""
+    centre = start
+    for _ in range(steps):
+        near = points[np.linalg.norm(points - centre, axis=1) < radius]
+        if len(near) == 0:
+            break
+        centre = near.mean(axis=0)
+    return centre
+
+
+def _upright(pose: np.ndarray) -> np.ndarray:
+    """``pose`` with its roll and pitch removed (yaw kept): an object resting on its support
+    at the start stands upright, though a few noisy points may tilt its fit."""
+    x = Rotation.from_quat(pose[3:]).apply([1.0, 0.0, 0.0])
+    return np.concatenate([pose[:3], Rotation.from_euler("z", np.arctan2(x[1], x[0])).as_quat()])
 
 
 def _extent(points: np.ndarray) -> float:
@@ -53,7 +95,7 @@ def distinctive_palettes(task: Task, models: list[ObjectModel], tol: float) -> l
         other = np.concatenate(others) if others else np.zeros((0, 3))
         shared = palette_mask(model.palette, other, tol, (lo / hi, hi / lo)) if other.size else np.zeros(len(model.palette), bool)
         own = model.palette[~shared]
-        area = model.face_area[palette_mask(model.face_rgb, own, tol, (1.0, 1.0))].sum() if len(own) else 0.0
+        area = model.face_area[palette_mask(model.face_rgb, own, tol, (0.99, 1.01))].sum() if len(own) else 0.0
         out.append(own if area >= MIN_DISTINCTIVE_AREA * model.face_area.sum() else model.palette)
     return out
 
@@ -76,7 +118,6 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
     poses = np.tile([0, 0, 0, 0, 0, 0, 1.0], (n, 1))
     found = np.zeros(n, bool)
     taken: dict[bytes, set[int]] = {}
-    yaws = np.arange(YAW_STEPS) * 2 * np.pi / YAW_STEPS
     palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
     for i, (obj, model) in enumerate(zip(task.objects, models)):
         if only is not None and i not in only:
@@ -87,8 +128,9 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
         key = palettes[i].tobytes()
         used = taken.setdefault(key, set())
         rest_height = mesh_extent(task.mesh(i))[1] if first_frame and i > 0 and obj.place.support == "table" else None
-        lifts = [0.0] if rest_height is not None else [-0.04, -0.02, 0.0, 0.02, 0.04]  # visible part vs anchor, in the air
-        best = (-1, None, -1)
+        shifts = [np.zeros(3)] if rest_height is not None else AIR_SHIFTS  # visible part vs anchor, in the air
+        best = (-np.inf, None, -1)
+        yaws = _yaw_grid(obj.symmetry)
         wide = max(0.03, model.radius / 3)  # a wheel's visible part is centred centimetres off its own centre
         coarse = TrackerConfig(gates_m=(wide, 0.015, 0.006), tukey_m=max(cfg.tukey_m, wide if wide > 0.03 else 0.0))
         fits = [g for g, idx in enumerate(groups) if _extent(pts[mask[idx]]) <= 2 * (model.radius + cfg.crop_margin_m)]
@@ -96,23 +138,26 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
             idx = groups[g]
             if g in used:
                 continue
-            seen = pts[mask[idx]].mean(axis=0)
-            for yaw, lift in ((y, dz) for y in yaws for dz in lifts):
+            seen = _centre_of_colour(pts[mask], pts[mask[idx]].mean(axis=0), 1.5 * model.radius)
+            for yaw, shift in ((y, d) for y in yaws for d in shifts):
                 R = Rotation.from_euler("z", yaw)
-                centre = seen - R.apply(anchor) + [0.0, 0.0, lift]
+                centre = seen - R.apply(anchor) + shift
                 if rest_height is not None:
                     centre[2] = rest_height
                 near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) < model.radius + cfg.crop_margin_m)
-                near = pts[near[model.colour_mask(cols[near], cfg.colour_tolerance)]]
+                near = near[model.colour_mask(cols[near], cfg.colour_tolerance)]
                 if len(near) < cfg.min_points:
                     continue
                 guess = np.concatenate([centre, R.as_quat()])
                 M = pose_to_matrix(guess)[:3, :3]
-                local = (near - guess[:3]) @ M
-                corr, rmse, inliers = _icp(model, local, coarse, (camera - guess[:3]) @ M)
-                if inliers > best[0]:
-                    best = (inliers, compose(guess, pose_from_matrix(np.linalg.inv(corr))), g)
-        if best[1] is not None and best[0] >= cfg.min_points:
-            poses[i], found[i] = best[1], True
+                local = (pts[near] - guess[:3]) @ M
+                corr, _, _ = _icp(model, local, coarse, (camera - guess[:3]) @ M)
+                agree = _agreement(model, local @ corr[:3, :3].T + corr[:3, 3], cols[near], cfg)
+                score = 2 * agree - len(near)
+                if score > best[0]:
+                    best = (score, compose(guess, pose_from_matrix(np.linalg.inv(corr))), g)
+        if best[1] is not None and best[0] >= cfg.min_points:  # the agreement net of what is left unexplained
+            resting = first_frame and i > 0 and obj.place.support != "air"
+            poses[i], found[i] = _upright(best[1]) if resting else best[1], True
             used.add(best[2])
     return poses, found

@@ -29,10 +29,14 @@ SHADE_RANGE = (0.3, 1.2)
 changes brightness, not chromaticity, but within bounds (black is never lit to steel)."""
 
 
+def colour_match(rgb: np.ndarray, albedo: np.ndarray, tol: float, shade: tuple[float, float] = SHADE_RANGE) -> np.ndarray:
+    """Whether pixel colours could show surfaces of the given albedo (broadcast, ``(…, 3)``
+    → ``(…)``): chromaticity within ``tol``, brightness within ``shade`` times the albedo's."""
+    near = np.linalg.norm(chromaticity(rgb) - chromaticity(albedo), axis=-1) <= tol
+    ratio = rgb.sum(axis=-1) / np.maximum(albedo.sum(axis=-1), 1e-6)
+    return near & (ratio >= shade[0]) & (ratio <= shade[1])
+
+
 def palette_mask(rgb: np.ndarray, palette: np.ndarray, tol: float, shade: tuple[float, float] = SHADE_RANGE) -> np.ndarray:
-    """Which colours ``(N, 3)`` could show a palette colour ``(K, 3)`` (albedo, same units)
-    under some shading: chromaticity within ``tol`` and brightness within ``shade`` times
-    the palette colour's, ``(N,)`` bool."""
-    near = np.linalg.norm(chromaticity(rgb)[:, None, :] - chromaticity(palette)[None], axis=-1) <= tol
-    ratio = rgb.sum(axis=-1)[:, None] / np.maximum(palette.sum(axis=-1)[None], 1e-6)
-    return np.any(near & (ratio >= shade[0]) & (ratio <= shade[1]), axis=1)
+    """Which colours ``(N, 3)`` could show one of the palette colours ``(K, 3)``, ``(N,)``."""
+    return np.any(colour_match(rgb[:, None, :], palette[None], tol, shade), axis=1)

@@ -45,12 +45,18 @@ class TrackerConfig:
     suspect_rmse_m: float = 0.004
     model_points: int = 1500
     redetect_after: int = 5
-    """Frames an object stays lost before a global search, and between searches."""
+    """Frames an object stays lost before a global search; the next ones come after 2, 4, 8, …
+    times as many (a nut under the socket is lost for seconds, and a search costs ~1 s)."""
+    min_gain: float = 0.05
+    """ICP's pose replaces the prediction only if it lowers the fit cost by this fraction:
+    noise alone must not move an object along a direction its visible part leaves free."""
+    max_points: int = 800
+    """Scene points per object for ICP, evenly thinned beyond this."""
 
 
-def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` points uniformly on the mesh surface and their face normals, ``(n, 3)`` each
-    (seeded, so that tracking is reproducible)."""
+def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` points uniformly on the mesh surface, their face normals and face indices,
+    ``(n, 3)``, ``(n, 3)``, ``(n,)`` (seeded, so that tracking is reproducible)."""
     v = mesh.vertices[mesh.triangles]  # (F, 3, 3)
     cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     area = np.linalg.norm(cross, axis=1)
@@ -60,14 +66,17 @@ def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.nda
     r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
     a, b, c = v[face, 0], v[face, 1], v[face, 2]
     points = a + r1[:, None] * (b - a) + r2[:, None] * (c - a)
-    return points, cross[face] / np.maximum(area[face], 1e-12)[:, None]
+    return points, cross[face] / np.maximum(area[face], 1e-12)[:, None], face
 
 
 class ObjectModel:
     """Surface samples with normals and the colour palette of one object."""
 
     def __init__(self, mesh: Mesh, n_points: int, seed: int = 0) -> None:
-        points, normals = sample_surface(mesh, n_points, np.random.default_rng(seed))
+        points, normals, face = sample_surface(mesh, n_points, np.random.default_rng(seed))
+        self.sample_rgb = mesh.face_rgb[face]
+        """Albedo (n_points, 3) at each surface sample."""
+        self.tree = cKDTree(points)
         self.cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
         self.cloud.normals = o3d.utility.Vector3dVector(normals)
         self.radius = float(np.max(np.linalg.norm(mesh.vertices, axis=1)))
@@ -103,6 +112,12 @@ def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig,
         T = result.transformation
     assert result is not None
     return T, float(result.inlier_rmse), int(len(result.correspondence_set))
+
+
+def _fit_cost(model: ObjectModel, local: np.ndarray, cfg: TrackerConfig) -> float:
+    """Mean truncated squared distance (m²) of points in the object frame to the model."""
+    d = model.tree.query(local, distance_upper_bound=cfg.gates_m[-1])[0]
+    return float(np.mean(np.minimum(d, cfg.gates_m[-1]) ** 2))
 
 
 def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], pred: np.ndarray,
@@ -154,7 +169,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
     ``depth (T, H, W)``, from world poses ``start (n, 7)`` at frame 0 (``found (n,)``
     says which of them are real). A lost object is searched for locally, from its last good
     pose, in every frame; once lost for ``cfg.redetect_after`` frames it is also searched
-    for globally with ``redetect``, every ``cfg.redetect_after`` frames. A lost object's
+    for globally with ``redetect``, then less and less often. A lost object's
     stored pose is its last good one (or prediction), marked LOST."""
     T_frames, n = len(depth), len(models)
     poses = np.zeros((T_frames, n, 7))
@@ -169,19 +184,24 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
         owner = assign_points(pts, cols, models, pred, cfg, known)
         for i in np.flatnonzero(known):
             sel = np.flatnonzero(owner == i)
+            sel = sel[:: -(-sel.size // cfg.max_points)] if sel.size > cfg.max_points else sel  # a wheel's top: thousands
             if sel.size < cfg.min_points:
                 poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
                 continue
             local = (pts[sel] - pred[i, :3]) @ pose_to_matrix(pred[i])[:3, :3]
             corr, rmse, inliers = _icp(models[i], local, cfg)  # no culling here: it lost objects mid-turn
-            poses[t, i] = compose(pred[i], pose_from_matrix(np.linalg.inv(corr)))
+            if _fit_cost(models[i], local @ corr[:3, :3].T + corr[:3, 3], cfg) < (1 - cfg.min_gain) * _fit_cost(models[i], local, cfg):
+                poses[t, i] = compose(pred[i], pose_from_matrix(np.linalg.inv(corr)))
+            else:  # no better than the prediction: a half-hidden canvas would slide along itself
+                poses[t, i] = pred[i]
             if inliers < cfg.min_points:
                 status[t, i] = TrackStatus.LOST
             elif rmse > cfg.suspect_rmse_m:
                 status[t, i] = TrackStatus.SUSPECT
         poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
-        search = np.flatnonzero(lost_for >= cfg.redetect_after)
-        if redetect is not None and search.size and lost_for[search].min() % cfg.redetect_after == 0:
+        k = lost_for // cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
+        search = np.flatnonzero((lost_for % cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
+        if redetect is not None and search.size:
             found_poses, ok = redetect(pts[owner < 0], cols[owner < 0], search.tolist())
             for i, p in zip(search[ok], found_poses[ok]):
                 poses[t, i], status[t, i], known[i] = p, TrackStatus.SUSPECT, True
