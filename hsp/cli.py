@@ -168,7 +168,7 @@ def label(
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     out: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet]"),
     recordings: Optional[Path] = typer.Option(None, help="recordings, to score the labels against the demonstrator's annotation"),
-    policy: Optional[Path] = typer.Option(None, help="trained model for EM refinement"),
+    policy: Optional[Path] = typer.Option(None, help="trained policy directory: EM refinement for up to label.em_iterations rounds"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
@@ -178,8 +178,9 @@ def label(
     from hsp.tasks.registry import load_task
 
     try:
-        if policy is not None:
-            raise HspError("EM refinement with trained policies is not available yet (training issue)")
+        if policy is not None:  # hsp.labeling.em.em_label runs EM given the trained networks as a score model
+            raise HspError(f"--policy {policy}: trained policies cannot be loaded yet; `hsp train` (issue 7) will write "
+                           "them. EM itself is hsp.labeling.em.em_label, which takes any score model.")
         params = load_params(params_file)
         cfg = section(params, "label", PriorConfig, ignore=("em_iterations",))
         t = load_task(task)

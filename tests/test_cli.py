@@ -94,3 +94,8 @@ def test_unknown_camera_key_is_named(tmp_path):
     params.write_text("camera: {widht: 80}\n")
     result = runner.invoke(app, ["record", "stacking-1", "--out", str(tmp_path / "x"), "--params", str(params)])
     assert result.exit_code == 1 and "camera: unknown keys ['widht']" in result.output
+
+
+def test_label_with_a_policy_says_training_is_missing(tmp_path):
+    result = runner.invoke(app, ["label", "painting", "--dataset", str(tmp_path), "--policy", str(tmp_path / "model")])
+    assert result.exit_code == 1 and "issue 7" in result.output and "em_label" in result.output

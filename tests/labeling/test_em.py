@@ -1,0 +1,60 @@
+"""EM refinement: the loop around Viterbi with any score model standing in for the networks."""
+
+import numpy as np
+import pytest
+
+from hsp.errors import HspError
+from hsp.labeling.em import em_label
+from hsp.labeling.priors import PriorConfig, PriorScores, pairs_of
+
+
+def _episode(H=40):
+    """End-effector (0) carries nothing and visits object 1, then object 2."""
+    world = np.zeros((H, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 1, :3] = [0.5, 0.1, 0.0]
+    world[:, 2, :3] = [0.5, -0.1, 0.0]
+    half = H // 2
+    world[:half, 0, :3] = np.linspace([0.5, 0.0, 0.3], [0.5, 0.1, 0.02], half)
+    world[half:, 0, :3] = np.linspace([0.5, 0.1, 0.3], [0.5, -0.1, 0.02], H - half)
+    return world, np.zeros((H, 3), np.int64)
+
+
+class Prefer(PriorScores):
+    """The priors, but π_h all but forbids every pair other than ``pair``."""
+
+    def __init__(self, world, status, pair):
+        super().__init__(world, status == 0, PriorConfig())
+        self.pair = pair
+
+    def unary(self, t):
+        u = np.full(self.P, -50.0)
+        u[self.pair] = 0.0
+        return u
+
+
+def test_a_model_that_agrees_with_the_labels_stops_em_after_one_round():
+    ep = _episode()
+    result = em_label([ep], PriorConfig(), lambda labels: lambda w, s: PriorScores(w, s == 0, PriorConfig()), iterations=3)
+    assert result.changed == [0.0]
+
+
+def test_the_fitted_model_replaces_the_priors_until_labels_settle():
+    ep = _episode()
+    fits = []
+
+    def fit(labels):
+        fits.append([lab.target.copy() for lab in labels])
+        return lambda w, s: Prefer(w, s, pair=int(np.flatnonzero((pairs_of(3) == [1, 2]).all(axis=1))[0]))
+
+    result = em_label([ep], PriorConfig(), fit, iterations=5)
+    assert len(fits) == 2 and result.changed[0] > 0 and result.changed[1] == 0.0
+    assert np.all(result.labels[0].tool == 1) and np.all(result.labels[0].target == 2)
+    assert not np.all(fits[0][0] == 2), "round 1 was fitted on the prior labels"
+
+
+def test_a_model_of_the_wrong_shape_is_a_clear_error():
+    ep = _episode()
+    short = (ep[0][:10], ep[1][:10])
+    with pytest.raises(HspError, match="scored 10 frames"):
+        em_label([ep], PriorConfig(), lambda labels: lambda w, s: PriorScores(*short[:1], short[1] == 0, PriorConfig()), 1)
