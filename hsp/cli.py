@@ -211,10 +211,25 @@ def report() -> None:
     _not_available("report", 9)
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def view(task: str = typer.Argument(...)) -> None:
-    """Overlay video, label timeline and Rerun recording of an episode (not available yet)."""
-    _not_available("view", 6)
+@app.command()
+def view(
+    task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
+    episode: int = typer.Option(0, help="episode index"),
+    recordings: Optional[Path] = typer.Option(None, help="recordings directory [data/recordings/TASK]"),
+    dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
+    labels: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet], for the timeline"),
+    out: Optional[Path] = typer.Option(None, help="output directory [reports/TASK/view]"),
+) -> None:
+    """Overlay video, label timeline and Rerun recording (.rrd) of one episode."""
+    from hsp.tasks.registry import load_task
+    from hsp.view.episode import view_episode
+
+    try:
+        t = load_task(task)
+        view_episode(t, episode, recordings or Path("data/recordings") / task, dataset or Path("data/datasets") / task,
+                     labels or Path("data/labels") / f"{task}.parquet", out or Path("reports") / task / "view")
+    except HspError as e:
+        _fail(e)
 
 
 if __name__ == "__main__":  # pragma: no cover

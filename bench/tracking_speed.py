@@ -1,0 +1,58 @@
+"""Benchmark: the tracker's frame rate at 640×480 (first-frame estimate included).
+
+For each task, the first ``--frames`` frames of two recordings are tracked (reading and
+decoding excluded): one at a time in one process, then both at once in two processes, as
+``hsp parse`` runs them (one Open3D thread each). Prints the median over ``--repeats`` of
+frames/s for one process and the combined rate of two. Issue 4's target: ≥ 30 frames/s
+with six objects (tire-removal) on this 2-core machine; the paper's GPU tracker: 90.
+Run: ``python bench/tracking_speed.py [--recordings data/recordings] [--frames 150] [--repeats 3]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # before Open3D is imported, here and in the workers
+
+import argparse  # noqa: E402
+import multiprocessing  # noqa: E402
+import statistics  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from hsp.perception.episode import object_models, track_recording  # noqa: E402
+from hsp.perception.tracker import TrackerConfig  # noqa: E402
+from hsp.recording.reader import read_recording  # noqa: E402
+from hsp.tasks.registry import list_tasks, load_task  # noqa: E402
+
+
+def _rate(job: tuple[str, Path, int]) -> float:
+    name, path, frames = job
+    task, cfg = load_task(name), TrackerConfig()
+    rec = read_recording(path)
+    rec.rgb, rec.depth = rec.rgb[:frames], rec.depth[:frames]
+    return len(rec.rgb) / track_recording(task, rec, object_models(task, cfg, 0), cfg).seconds
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--recordings", type=Path, default=Path("data/recordings"))
+    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    print(f"{'task':14s} {'objects':>7s} {'1 process':>10s} {'2 processes':>12s}   (frames/s, median of {args.repeats})")
+    pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn"))
+    for name in list_tasks():
+        paths = sorted((args.recordings / name).glob("*.mcap"))[:2]
+        if len(paths) < 2:
+            print(f"{name:14s} needs two recordings under {args.recordings / name}")
+            continue
+        jobs = [(name, p, args.frames) for p in paths]
+        one = [_rate(jobs[0]) for _ in range(args.repeats)]
+        two = [sum(pool.map(_rate, jobs)) for _ in range(args.repeats)]
+        print(f"{name:14s} {len(load_task(name).objects):7d} {statistics.median(one):10.1f} {statistics.median(two):12.1f}", flush=True)
+    pool.shutdown()
+
+
+if __name__ == "__main__":
+    main()

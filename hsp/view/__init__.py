@@ -1,0 +1,1 @@
+"""Seeing what the pipeline did: tracking overlays, label timelines, Rerun recordings."""

@@ -1,0 +1,80 @@
+"""``hsp view``: the overlay video, the label timeline and the Rerun recording of one episode."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hsp.dataset.build import list_recordings
+from hsp.dataset.reader import load_episodes
+from hsp.errors import HspError
+from hsp.recording.ground_truth import GroundTruth, read_ground_truth
+from hsp.recording.reader import read_recording
+from hsp.sim.render import load_mesh
+from hsp.tasks.registry import Task
+from hsp.view.overlay import write_overlay
+from hsp.view.rerun_log import write_rrd
+from hsp.view.timeline import write_timeline
+
+log = logging.getLogger(__name__)
+
+
+def _labels(labels_file: Path | None, episode: int, frames: int) -> dict[str, np.ndarray] | None:
+    if labels_file is None or not Path(labels_file).is_file():
+        return None
+    import pandas as pd
+
+    df = pd.read_parquet(labels_file)
+    rows = df[df["episode_index"] == episode].sort_values("frame_index")
+    if len(rows) != frames:
+        raise HspError(f"{labels_file}: episode {episode} has {len(rows)} labelled frames, the dataset {frames}")
+    return {k: rows[k].to_numpy() for k in ("tool", "target", "waypoint_index")}
+
+
+def _truth(path: Path) -> GroundTruth | None:
+    try:
+        return read_ground_truth(path)
+    except HspError:
+        return None
+
+
+def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Path, labels_file: Path | None,
+                 out_dir: Path) -> dict[str, Path]:
+    """Write ``episode_N.mp4``, ``episode_N_timeline.png`` and ``episode_N.rrd`` into ``out_dir``."""
+    start = time.perf_counter()
+    poses, status, meta = load_episodes(dataset_dir, task.name)
+    if meta["objects"] != task.names:
+        raise HspError(f"{dataset_dir}: objects {meta['objects']} are not those of task {task.name!r}")
+    if not 0 <= episode < len(poses):
+        raise HspError(f"{dataset_dir}: no episode {episode} (the dataset has 0–{len(poses) - 1})")
+    recordings = list_recordings(recordings_dir)
+    if len(recordings) != len(poses):
+        raise HspError(f"{recordings_dir}: {len(recordings)} recordings for {len(poses)} dataset episodes")
+    rec = read_recording(recordings[episode])
+    P, S = poses[episode], status[episode]
+    if len(rec.rgb) != len(P):
+        raise HspError(f"{recordings[episode]}: {len(rec.rgb)} frames, dataset episode {episode} has {len(P)}")
+    if rec.T_world_cam is None:
+        raise HspError(f"{recordings[episode]}: no camera pose in /tf_static; cannot project the poses")
+    gt = _truth(recordings[episode])
+    truth = gt.poses if gt is not None and gt.objects == task.names and len(gt.poses) == len(P) else None
+    labels = _labels(labels_file, episode, len(P))
+    meshes = [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
+    out_dir = Path(out_dir)
+    stem = f"episode_{episode:06d}"
+    fps = float(meta["fps"])
+    out = {"video": write_overlay(out_dir / f"{stem}.mp4", rec.rgb, meshes, P, S, rec.K, rec.T_world_cam, fps, truth)}
+    if labels is not None:
+        true_labels = None if truth is None else {"tool": gt.tool, "target": gt.target, "waypoint_index": gt.waypoint_index}
+        out["timeline"] = write_timeline(out_dir / f"{stem}_timeline.png", task.names, labels, S, true_labels, fps,
+                                         f"{task.name}, episode {episode}: pseudo-labels above the demonstrator's annotation")
+    else:
+        log.warning("no labels for %s (run `hsp label %s` first): timeline skipped", stem, task.name)
+    out["rerun"] = write_rrd(out_dir / f"{stem}.rrd", task.names, meshes, P, rec.rgb, rec.depth, rec.K, rec.T_world_cam,
+                             labels, truth)
+    log.info("view %s episode %d: read %s, %s; wrote %s in %.1f s", task.name, episode, recordings[episode], dataset_dir,
+             ", ".join(str(p) for p in out.values()), time.perf_counter() - start)
+    return out
