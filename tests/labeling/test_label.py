@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
 from hsp.labeling.label import label_episode
 from hsp.labeling.metrics import boundaries, boundary_errors, label_metrics
@@ -57,3 +58,20 @@ def test_boundary_errors():
     assert list(boundaries(np.array([0, 0, 1, 1]), np.array([2, 2, 2, 3]))) == [2, 3]
     np.testing.assert_array_equal(boundary_errors(np.array([5]), np.array([3, 9]), 20), [2, 4])
     np.testing.assert_array_equal(boundary_errors(np.array([]), np.array([3]), 20), [20])
+
+
+def test_lost_frames_are_never_way_points_of_the_lost_object():
+    """Documented behaviour: a lost object's frames carry no evidence (no motion term) and
+    cannot be way-points of pairs involving it; labelling still covers every frame."""
+    from hsp.labeling.priors import PriorScores
+    from tests.labeling.test_em import _episode
+
+    world, status = _episode(60)
+    status[40:46, 2] = TrackStatus.LOST
+    scores = PriorScores(world, status != TrackStatus.LOST, PriorConfig())
+    involves_2 = (scores.pairs == 2).any(axis=1)
+    J = scores.jump(10)  # way-points k = 10 … 59
+    assert np.all(np.isneginf(J[involves_2][:, 30:36])) and np.all(np.isfinite(J[~involves_2]))
+    assert np.all(scores.motion(42)[involves_2] == 0.0)
+    lab = label_episode(world, status, PriorConfig())
+    assert len(lab.tool) == 60 and np.all(lab.target != 0)
