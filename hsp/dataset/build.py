@@ -13,6 +13,7 @@ import os
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,19 +104,13 @@ def _track_one(job: TrackJob) -> TrackOutcome:
 
 def _tracked_episodes(jobs: list[TrackJob], workers: int, outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
     """Episodes in order, tracked in ``workers`` processes (one Open3D thread each)."""
-    with Progress() as progress:
+    with Progress() as progress, _one_omp_thread():
         bar = progress.add_task(f"track {jobs[0].task}", total=len(jobs))
+        pool = None
         if workers == 1:
             results: Iterator[TrackOutcome] = map(_track_one, jobs)
-            pool = None
         else:
-            saved = os.environ.get("OMP_NUM_THREADS")
-            os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the spawned workers before they import Open3D
             pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-            if saved is None:
-                del os.environ["OMP_NUM_THREADS"]
-            else:
-                os.environ["OMP_NUM_THREADS"] = saved
             results = pool.map(_track_one, jobs)
         try:
             for outcome in results:
@@ -125,6 +120,21 @@ def _tracked_episodes(jobs: list[TrackJob], workers: int, outcomes: list[TrackOu
         finally:
             if pool is not None:
                 pool.shutdown(cancel_futures=True)
+
+
+@contextmanager
+def _one_omp_thread() -> Iterator[None]:
+    """``OMP_NUM_THREADS=1`` while the pool lives: workers are spawned on demand and read it
+    before they import Open3D (two OpenMP threads per worker on two cores spin and slow down)."""
+    saved = os.environ.get("OMP_NUM_THREADS")
+    os.environ["OMP_NUM_THREADS"] = "1"
+    try:
+        yield
+    finally:
+        if saved is None:
+            del os.environ["OMP_NUM_THREADS"]
+        else:
+            os.environ["OMP_NUM_THREADS"] = saved
 
 
 def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall_seconds: float) -> dict[str, float | int | str]:
