@@ -219,6 +219,7 @@ def view(
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     labels: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet], for the timeline"),
     out: Optional[Path] = typer.Option(None, help="output directory [reports/TASK/view]"),
+    rrd_every: int = typer.Option(2, help="every n-th frame goes into the Rerun recording (0.7 MB per frame)"),
 ) -> None:
     """Overlay video, label timeline and Rerun recording (.rrd) of one episode."""
     from hsp.tasks.registry import load_task
@@ -227,7 +228,7 @@ def view(
     try:
         t = load_task(task)
         view_episode(t, episode, recordings or Path("data/recordings") / task, dataset or Path("data/datasets") / task,
-                     labels or Path("data/labels") / f"{task}.parquet", out or Path("reports") / task / "view")
+                     labels or Path("data/labels") / f"{task}.parquet", out or Path("reports") / task / "view", rrd_every)
     except HspError as e:
         _fail(e)
 

@@ -42,9 +42,11 @@ def _truth(path: Path) -> GroundTruth | None:
 
 
 def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Path, labels_file: Path | None,
-                 out_dir: Path) -> dict[str, Path]:
+                 out_dir: Path, rrd_every: int = 1) -> dict[str, Path]:
     """Write ``episode_N.mp4``, ``episode_N_timeline.png`` and ``episode_N.rrd`` into ``out_dir``."""
     start = time.perf_counter()
+    if rrd_every < 1:
+        raise HspError(f"--rrd-every {rrd_every}: must be at least 1")
     poses, status, meta = load_episodes(dataset_dir, task.name)
     if meta["objects"] != task.names:
         raise HspError(f"{dataset_dir}: objects {meta['objects']} are not those of task {task.name!r}")
@@ -74,7 +76,7 @@ def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Pa
     else:
         log.warning("no labels for %s (run `hsp label %s` first): timeline skipped", stem, task.name)
     out["rerun"] = write_rrd(out_dir / f"{stem}.rrd", task.names, meshes, P, rec.rgb, rec.depth, rec.K, rec.T_world_cam,
-                             labels, truth)
+                             labels, truth, rrd_every)
     log.info("view %s episode %d: read %s, %s; wrote %s in %.1f s", task.name, episode, recordings[episode], dataset_dir,
              ", ".join(str(p) for p in out.values()), time.perf_counter() - start)
     return out
