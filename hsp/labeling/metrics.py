@@ -19,9 +19,10 @@ def boundary_errors(pred: np.ndarray, truth: np.ndarray, H: int) -> np.ndarray:
     return np.abs(truth[:, None] - pred[None, :]).min(axis=1).astype(float)
 
 
-def label_metrics(pred: list[dict[str, np.ndarray]], truth: list[dict[str, np.ndarray]]) -> dict[str, float]:
+def label_metrics(pred: list[dict[str, np.ndarray]], truth: list[dict[str, np.ndarray]]) -> dict[str, float | None]:
     """Frame accuracies, median boundary error (frames) and median way-point error (mm,
-    over frames whose tool and target are right). Each item has tool, target, waypoint."""
+    over frames whose tool and target are right; ``None`` when there are none, as JSON
+    has no NaN). Each item has tool, target, waypoint."""
     tool_ok, target_ok, b_err, w_err = [], [], [], []
     for p, g in zip(pred, truth):
         tool_ok.append(p["tool"] == g["tool"])
@@ -35,5 +36,5 @@ def label_metrics(pred: list[dict[str, np.ndarray]], truth: list[dict[str, np.nd
         "tool_accuracy": float(np.mean(cat(tool_ok))),
         "target_accuracy": float(np.mean(cat(target_ok))),
         "boundary_error_frames_median": float(np.median(b)) if b.size else 0.0,
-        "waypoint_error_mm_median": float(np.median(w)) if w.size else float("nan"),
+        "waypoint_error_mm_median": float(np.median(w)) if w.size else None,
     }

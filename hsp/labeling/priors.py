@@ -62,17 +62,20 @@ def relative_poses(world: np.ndarray) -> np.ndarray:
     return relative(world[:, :, None, :].repeat(n, 2), world[:, None, :, :].repeat(n, 1))
 
 
-def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float) -> np.ndarray:
+def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_window: int = 2) -> np.ndarray:
     """Per frame: the object moving most relative to the other non-end-effector objects
     (mean per-frame change of their separation, world translation, so a rotating object
     does not make the others look as if they moved); 0 (end-effector) when no such object
     moves more than ``moving_m`` but the end-effector does; −1 when everything is still
-    (no evidence: a held object pausing with the hand); ``(H,)``."""
+    (no evidence: a held object pausing with the hand); ``(H,)``. Each change is averaged
+    over ``half_window`` frames either side: tracking jitter cancels, motion does not."""
     H, n = world.shape[:2]
     x = world[:, :, :3]
     sep = x[:, :, None, :] - x[:, None, :, :]  # (H, n, n, 3)
-    change = np.linalg.norm(np.diff(sep, axis=0), axis=-1)  # (H-1, n, n)
-    valid = ok[1:] & ok[:-1]
+    a = np.clip(np.arange(H - 1) - half_window, 0, H - 1)  # step t → t+1 measured over [t − w, t + 1 + w]
+    b = np.clip(np.arange(H - 1) + 1 + half_window, 0, H - 1)
+    change = np.linalg.norm(sep[b] - sep[a], axis=-1) / (b - a)[:, None, None]  # (H-1, n, n), per frame
+    valid = ok[b] & ok[a]
     pair_ok = valid[:, :, None] & valid[:, None, :]
     pair_ok[:, np.arange(n), np.arange(n)] = False
     pair_ok[:, :, 0] = False  # separations from the end-effector do not count

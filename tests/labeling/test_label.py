@@ -32,10 +32,24 @@ def test_tool_evidence_three_cases():
     world[:, 2, 0] += 0.3
     world[1, 0, 0] += 0.05  # hand moves between frames 0→1 and back 1→2
     world[3, :2, 1] += 0.05  # hand and block move together 2→3
-    ev = tool_evidence(world, np.ones((H, n), bool), moving_m=0.002)
+    ev = tool_evidence(world, np.ones((H, n), bool), moving_m=0.002, half_window=0)
     assert list(ev[:3]) == [0, 0, 1]
     still = np.tile(world[:1], (H, 1, 1))
     assert np.all(tool_evidence(still, np.ones((H, n), bool), 0.002) == -1)
+
+
+def test_tracking_jitter_is_not_tool_evidence_but_steady_motion_is():
+    """A block jittering ±1.5 mm frame to frame (3 mm steps) is no tool; one carried 3 mm a frame is."""
+    H, n = 30, 3
+    world = np.tile([0.5, 0.0, 0.02, 0, 0, 0, 1.0], (H, n, 1))
+    world[:, 2, 0] += 0.3
+    jitter = world.copy()
+    jitter[:, 1, 0] += 0.0015 * (-1) ** np.arange(H)
+    assert np.all(tool_evidence(jitter, np.ones((H, n), bool), 0.002, half_window=0)[:-1] == 1), "per frame it looks moving"
+    assert np.all(tool_evidence(jitter, np.ones((H, n), bool), 0.002) == -1)
+    carried = world.copy()
+    carried[:, 1, 1] += 0.003 * np.arange(H)
+    assert np.all(tool_evidence(carried, np.ones((H, n), bool), 0.002) == 1)
 
 
 @pytest.mark.parametrize("name", ["stacking-1", "painting"])
