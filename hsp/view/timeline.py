@@ -26,10 +26,12 @@ def bands(values: np.ndarray) -> list[tuple[int, int, int]]:
 
 
 def object_colours(n: int) -> np.ndarray:
-    """One distinct RGB colour per object index ``(n, 3)`` in [0, 1]."""
+    """One distinct RGB colour per object index ``(n, 3)`` in [0, 1]; tab10 without its green
+    and red, which mean ok and lost in the status rows."""
     from matplotlib import colormaps
 
-    return np.asarray(colormaps["tab10"](np.arange(n) % 10))[:, :3]
+    picks = np.array([0, 1, 4, 5, 6, 7, 8, 9])
+    return np.asarray(colormaps["tab10"](picks[np.arange(n) % len(picks)]))[:, :3]
 
 
 def write_timeline(path: Path, objects: list[str], labels: dict[str, np.ndarray], status: np.ndarray,
