@@ -26,7 +26,7 @@ from hsp.errors import HspError
 from hsp.perception.episode import object_models, track_recording
 from hsp.perception.metrics import auc, episode_errors, match_identical
 from hsp.perception.tracker import TrackerConfig
-from hsp.recording.ground_truth import GroundTruth, read_ground_truth
+from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
 from hsp.recording.reader import ReadOptions, read_recording
 from hsp.tasks.registry import Task, load_task
 
@@ -91,11 +91,8 @@ def _track_one(job: TrackJob) -> TrackOutcome:
     frames = len(rec.rgb)
     del rec
     errors = None
-    try:
-        gt = read_ground_truth(job.path)
-    except HspError:
-        gt = None
-    if gt is not None and gt.objects == task.names and len(gt.poses) == frames:
+    gt = matching_ground_truth(job.path, task.names, frames)
+    if gt is not None:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
         order = match_identical(identical_groups(task), tracked.poses, gt.poses)
         errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses[:, order], gt.poses)

@@ -54,11 +54,16 @@ class TrackerConfig:
     """Scene points per object for ICP, evenly thinned beyond this."""
 
 
+def _face_cross(tri: np.ndarray) -> np.ndarray:
+    """Edge cross product of each triangle ``(F, 3, 3)`` → ``(F, 3)``: twice the area along the normal."""
+    return np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+
+
 def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` points uniformly on the mesh surface, their face normals and face indices,
     ``(n, 3)``, ``(n, 3)``, ``(n,)`` (seeded, so that tracking is reproducible)."""
     v = mesh.vertices[mesh.triangles]  # (F, 3, 3)
-    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    cross = _face_cross(v)
     area = np.linalg.norm(cross, axis=1)
     face = rng.choice(len(area), size=n, p=area / area.sum())
     r1, r2 = rng.random(n), rng.random(n)
@@ -84,7 +89,7 @@ class ObjectModel:
         """Albedo colours (K, 3) of the model's faces."""
         tri = mesh.vertices[mesh.triangles]
         self.face_centres = tri.mean(axis=1)
-        self.face_area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        self.face_area = 0.5 * np.linalg.norm(_face_cross(tri), axis=1)
         self.face_rgb = mesh.face_rgb
 
     def colour_mask(self, rgb: np.ndarray, tol: float) -> np.ndarray:

@@ -82,3 +82,13 @@ def read_ground_truth(path: Path) -> GroundTruth:
 
 def episode_objects(meta: dict[str, str]) -> list[str]:
     return json.loads(meta.get("objects", "[]"))
+
+
+def matching_ground_truth(path: Path, objects: list[str], frames: int) -> GroundTruth | None:
+    """The recording's ground truth if it has one for these ``objects`` and ``frames``, else
+    ``None`` (a real camera's recording has none; scoring and overlays then go without)."""
+    try:
+        gt = read_ground_truth(path)
+    except HspError:
+        return None
+    return gt if gt.objects == objects and len(gt.poses) == frames else None

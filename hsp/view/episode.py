@@ -11,7 +11,7 @@ import numpy as np
 from hsp.dataset.build import list_recordings
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
-from hsp.recording.ground_truth import GroundTruth, read_ground_truth
+from hsp.recording.ground_truth import matching_ground_truth
 from hsp.recording.reader import read_recording
 from hsp.sim.render import load_mesh
 from hsp.tasks.registry import Task
@@ -34,13 +34,6 @@ def _labels(labels_file: Path | None, episode: int, frames: int) -> dict[str, np
     return {k: rows[k].to_numpy() for k in ("tool", "target", "waypoint_index")}
 
 
-def _truth(path: Path) -> GroundTruth | None:
-    try:
-        return read_ground_truth(path)
-    except HspError:
-        return None
-
-
 def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Path, labels_file: Path | None,
                  out_dir: Path, rrd_every: int = 1) -> dict[str, Path]:
     """Write ``episode_N.mp4``, ``episode_N_timeline.png`` and ``episode_N.rrd`` into ``out_dir``."""
@@ -61,8 +54,8 @@ def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Pa
         raise HspError(f"{recordings[episode]}: {len(rec.rgb)} frames, dataset episode {episode} has {len(P)}")
     if rec.T_world_cam is None:
         raise HspError(f"{recordings[episode]}: no camera pose in /tf_static; cannot project the poses")
-    gt = _truth(recordings[episode])
-    truth = gt.poses if gt is not None and gt.objects == task.names and len(gt.poses) == len(P) else None
+    gt = matching_ground_truth(recordings[episode], task.names, len(P))
+    truth = None if gt is None else gt.poses
     labels = _labels(labels_file, episode, len(P))
     meshes = [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
     out_dir = Path(out_dir)
