@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hsp.perception.metrics import add_s, auc, rotation_error_deg
-from hsp.perception.tracker import ObjectModel, TrackerConfig, track
+from hsp.perception.tracker import SurfaceModel, TrackerConfig, track
 from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.reader import read_recording
 from hsp.sim.render import load_mesh
@@ -33,8 +33,8 @@ def main() -> None:
     for name in list_tasks():
         task = load_task(name)
         meshes = [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
-        models = [ObjectModel(m, TrackerConfig().model_points, i) for i, m in enumerate(meshes)]
-        samples = [np.asarray(ObjectModel(m, 500).cloud.points) for m in meshes]
+        models = [SurfaceModel(m, TrackerConfig().model_points, i) for i, m in enumerate(meshes)]
+        samples = [np.asarray(SurfaceModel(m, 500).cloud.points) for m in meshes]
         te, re, adds, lost, frames, seconds = [], [], [], [], 0, 0.0
         for path in sorted((args.recordings / name).glob("*.mcap"))[: args.episodes]:
             rec, gt = read_recording(path), read_ground_truth(path)

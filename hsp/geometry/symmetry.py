@@ -24,6 +24,8 @@ def symmetry_rotations(symmetry: str, resting: bool = False) -> np.ndarray:
     """
     if symmetry in Z_FOLDS:
         return z_rotations(Z_FOLDS[symmetry])
+    if symmetry == "x_2fold":  # a half turn about x turns a resting object upside down
+        return np.eye(3)[None] if resting else np.stack([np.eye(3), Rotation.from_rotvec([np.pi, 0, 0]).as_matrix()])
     if symmetry == "cube":
         return z_rotations(4) if resting else Rotation.create_group("O").as_matrix()
     if symmetry == "z_continuous" and resting:

@@ -16,7 +16,8 @@ import numpy as np
 
 from hsp.errors import HspError
 from hsp.perception.initialize import initialize
-from hsp.perception.tracker import ObjectModel, TrackerConfig, scene_points, track
+from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestState
+from hsp.perception.tracker import SurfaceModel, TrackerConfig, scene_points, track
 from hsp.recording.reader import Recording
 from hsp.sim.render import load_mesh
 from hsp.tasks.registry import Task
@@ -32,12 +33,21 @@ class TrackedEpisode:
     """Time spent initialising and tracking (reading excluded)."""
 
 
-def object_models(task: Task, cfg: TrackerConfig, seed: int) -> list[ObjectModel]:
+def object_models(task: Task, cfg: TrackerConfig, seed: int) -> list[SurfaceModel]:
     """The task's surface models; a missing or unreadable mesh is an error naming it."""
-    return [ObjectModel(load_mesh(task.mesh(i)), cfg.model_points, seed + i) for i in range(len(task.objects))]
+    return [SurfaceModel(load_mesh(task.mesh(i)), cfg.model_points, seed + i, o.symmetry)
+            for i, o in enumerate(task.spec.objects)]
 
 
-def track_recording(task: Task, rec: Recording, models: list[ObjectModel], cfg: TrackerConfig = TrackerConfig(),
+def rest_state(task: Task, models: list[SurfaceModel]) -> RestState:
+    """Which objects can rest and on which body axes: every face of a cube, the z axis of
+    the others as the layout stands them; never the end-effector or what starts in the air."""
+    axes = [None if i == 0 or o.place.support == "air" else CUBE_AXES if o.symmetry == "cube" else UPRIGHT
+            for i, o in enumerate(task.spec.objects)]
+    return RestState(axes, [m.surface for m in models])
+
+
+def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg: TrackerConfig = TrackerConfig(),
                     progress: Callable[[], None] | None = None) -> TrackedEpisode:
     """Estimate the first frame's scene, then track every object through ``rec``."""
     if rec.T_world_cam is None:
@@ -52,5 +62,6 @@ def track_recording(task: Task, rec: Recording, models: list[ObjectModel], cfg: 
         poses, ok = initialize(task, p, c, models, camera, cfg, only=idx, first_frame=False)
         return poses[idx], ok[idx]
 
-    poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, first, cfg, found, redetect, progress)
+    poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, first, cfg, found, redetect, progress,
+                          rest_state(task, models))
     return TrackedEpisode(poses, status, time.perf_counter() - start)

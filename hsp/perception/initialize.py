@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
 from hsp.geometry.symmetry import Z_FOLDS
 from hsp.perception.pointcloud import SHADE_RANGE, colour_match, palette_mask
-from hsp.perception.tracker import ObjectModel, TrackerConfig, _icp
+from hsp.perception.tracker import SurfaceModel, TrackerConfig, _icp, colour_agreement
 from hsp.tasks.layout import mesh_extent
 from hsp.tasks.registry import Task
 
@@ -51,15 +51,6 @@ def _yaw_grid(symmetry: str) -> np.ndarray:
     return np.arange(steps) * 2 * np.pi / (period * steps)
 
 
-def _agreement(model: ObjectModel, local: np.ndarray, cols: np.ndarray, cfg: TrackerConfig) -> int:
-    """Scene points (in the object frame) that lie on the model's surface, within the finest
-    tracking gate, where the model has their colour: a flipped brush puts its bristles where the
-    handle is seen and scores low, though its shape fits as well."""
-    d, j = model.tree.query(local, distance_upper_bound=cfg.gates_m[0])
-    on = np.flatnonzero(np.isfinite(d))
-    return int(np.count_nonzero(colour_match(cols[on], model.sample_rgb[j[on]], cfg.colour_tolerance)))
-
-
 def _centre_of_colour(points: np.ndarray, start: np.ndarray, radius: float, steps: int = 3) -> np.ndarray:
     """Mean-shift of ``start`` over the object's colour ``points`` within ``radius``: the
     centre of the whole visible object when DBSCAN cut it in two (a bucket's rim and inside)."""
@@ -84,7 +75,7 @@ def _extent(points: np.ndarray) -> float:
     return float(np.max(points.max(axis=0) - points.min(axis=0)))
 
 
-def distinctive_palettes(task: Task, models: list[ObjectModel], tol: float) -> list[np.ndarray]:
+def distinctive_palettes(task: Task, models: list[SurfaceModel], tol: float) -> list[np.ndarray]:
     """Each object's colours that no differently labelled object of the task has (the
     brush's brown, not its grey ferrule, which the canvas shares); all its colours if those
     cover less than ``MIN_DISTINCTIVE_AREA`` of its surface (a nut's small paint mark)."""
@@ -107,7 +98,7 @@ def _anchor(face_centres: np.ndarray, face_rgb: np.ndarray, palette: np.ndarray,
     return face_centres[sel].mean(axis=0) if sel.any() else face_centres.mean(axis=0)
 
 
-def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], camera: np.ndarray,
+def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel], camera: np.ndarray,
                cfg: TrackerConfig = TrackerConfig(), only: list[int] | None = None,
                first_frame: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """World poses ``(n, 7)`` and whether each was found ``(n,)``, for every object or the
@@ -152,7 +143,7 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Objec
                 M = pose_to_matrix(guess)[:3, :3]
                 local = (pts[near] - guess[:3]) @ M
                 corr, _, _ = _icp(model, local, coarse, (camera - guess[:3]) @ M)
-                agree = _agreement(model, local @ corr[:3, :3].T + corr[:3, 3], cols[near], cfg)
+                agree = colour_agreement(model, local @ corr[:3, :3].T + corr[:3, 3], cols[near], cfg)
                 score = 2 * agree - len(near)
                 if score > best[0]:
                     best = (score, compose(guess, pose_from_matrix(np.linalg.inv(corr))), g)

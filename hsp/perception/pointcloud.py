@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hsp.geometry import pose_to_matrix
+from hsp.geometry import inverse, pose_to_matrix, transform_points
 
 
 def backproject(depth: np.ndarray, rgb: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, stride: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -17,6 +17,15 @@ def backproject(depth: np.ndarray, rgb: np.ndarray, K: np.ndarray, T_world_cam: 
     pc = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1)
     M = pose_to_matrix(T_world_cam)
     return pc @ M[:3, :3].T + M[:3, 3], rgb[v, u].astype(np.float64) / 255.0
+
+
+def project(points_world: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates ``(N, 2)`` (u right, v down; pixel centres at integers) of world
+    points ``(N, 3)`` and their depth along the optical axis ``(N,)``."""
+    pc = transform_points(inverse(T_world_cam), points_world)
+    z = pc[:, 2]
+    uv = (pc[:, :2] / np.maximum(z, 1e-9)[:, None]) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+    return uv, z
 
 
 def chromaticity(rgb: np.ndarray) -> np.ndarray:

@@ -24,7 +24,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.perception.pointcloud import backproject, palette_mask
+from hsp.perception.pointcloud import backproject, colour_match, palette_mask
+from hsp.perception.rest import RestState, seen_through
 from hsp.sim.render import Mesh
 
 
@@ -52,6 +53,9 @@ class TrackerConfig:
     noise alone must not move an object along a direction its visible part leaves free."""
     max_points: int = 800
     """Scene points per object for ICP, evenly thinned beyond this."""
+    flip_margin: float = 0.15
+    """Share of an object's points whose colour a half-turned pose must explain better to
+    replace ICP's (see :func:`unflip`)."""
 
 
 def _face_cross(tri: np.ndarray) -> np.ndarray:
@@ -74,13 +78,16 @@ def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.nda
     return points, cross[face] / np.maximum(area[face], 1e-12)[:, None], face
 
 
-class ObjectModel:
+class SurfaceModel:
     """Surface samples with normals and the colour palette of one object."""
 
-    def __init__(self, mesh: Mesh, n_points: int, seed: int = 0) -> None:
+    def __init__(self, mesh: Mesh, n_points: int, seed: int = 0, symmetry: str = "none") -> None:
+        self.symmetry = symmetry
         points, normals, face = sample_surface(mesh, n_points, np.random.default_rng(seed))
         self.sample_rgb = mesh.face_rgb[face]
         """Albedo (n_points, 3) at each surface sample."""
+        self.surface, self.normals = points, normals
+        """Surface samples and their normals ``(n_points, 3)`` in the object frame."""
         self.tree = cKDTree(points)
         self.cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
         self.cloud.normals = o3d.utility.Vector3dVector(normals)
@@ -91,12 +98,15 @@ class ObjectModel:
         self.face_centres = tri.mean(axis=1)
         self.face_area = 0.5 * np.linalg.norm(_face_cross(tri), axis=1)
         self.face_rgb = mesh.face_rgb
+        self.centroid = points.mean(axis=0)
+        self.can_flip = symmetry == "none" and len(self.palette) > 1
+        """Turned end for end, its shape could fit as well; only its colours tell."""
 
     def colour_mask(self, rgb: np.ndarray, tol: float) -> np.ndarray:
         return palette_mask(rgb, self.palette, tol)
 
 
-def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig,
+def _icp(model: SurfaceModel, points_obj: np.ndarray, cfg: TrackerConfig,
          camera_obj: np.ndarray | None = None) -> tuple[np.ndarray, float, int]:
     """Correction ``T (4, 4)`` taking the points (in the predicted object frame) onto the
     model, the inlier RMSE and the inlier count at the last gate. With the camera position
@@ -119,13 +129,45 @@ def _icp(model: ObjectModel, points_obj: np.ndarray, cfg: TrackerConfig,
     return T, float(result.inlier_rmse), int(len(result.correspondence_set))
 
 
-def _fit_cost(model: ObjectModel, local: np.ndarray, cfg: TrackerConfig) -> float:
+def _fit_cost(model: SurfaceModel, local: np.ndarray, cfg: TrackerConfig) -> float:
     """Mean truncated squared distance (m²) of points in the object frame to the model."""
     d = model.tree.query(local, distance_upper_bound=cfg.gates_m[-1])[0]
     return float(np.mean(np.minimum(d, cfg.gates_m[-1]) ** 2))
 
 
-def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], pred: np.ndarray,
+def colour_agreement(model: SurfaceModel, local: np.ndarray, cols: np.ndarray, cfg: TrackerConfig) -> int:
+    """Scene points (in the object frame) that lie on the model's surface, within the first
+    tracking gate, where the model has their colour: a flipped brush puts its bristles where
+    the handle is seen and scores low, though its shape fits as well."""
+    d, j = model.tree.query(local, distance_upper_bound=cfg.gates_m[0])
+    on = np.flatnonzero(np.isfinite(d))
+    return int(np.count_nonzero(colour_match(cols[on], model.sample_rgb[j[on]], cfg.colour_tolerance)))
+
+
+FLIPS = Rotation.from_rotvec(np.pi * np.eye(3)).as_matrix()
+"""Half turns about the body x, y and z axes."""
+
+
+def unflip(model: SurfaceModel, local: np.ndarray, cols: np.ndarray, cfg: TrackerConfig) -> np.ndarray | None:
+    """The half turn about the model's centroid, ``(4, 4)`` in the object frame, that
+    explains the points' colours markedly better (``cfg.flip_margin`` of them) with a shape
+    fit no worse; None when the pose is right."""
+    c = model.centroid
+    best, best_R = colour_agreement(model, local, cols, cfg) + cfg.flip_margin * len(local), None
+    cost = _fit_cost(model, local, cfg)
+    for R in FLIPS:
+        turned = (local - c) @ R + c  # the points as the half-turned model sees them
+        agree = colour_agreement(model, turned, cols, cfg)
+        if agree > best and _fit_cost(model, turned, cfg) <= 1.5 * cost:
+            best, best_R = agree, R
+    if best_R is None:
+        return None
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = best_R, c - best_R @ c
+    return T
+
+
+def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel], pred: np.ndarray,
                   cfg: TrackerConfig, active: np.ndarray | None = None) -> np.ndarray:
     """Owner of each scene point ``(N,)``: the object whose predicted surface is nearest,
     among those whose crop and colour palette admit the point; −1 for none. Occluding and
@@ -145,6 +187,11 @@ def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[ObjectModel], 
         best[cand[closer]] = d[closer]
         owner[cand[closer]] = i
     return owner
+
+
+def owner_count(owner: np.ndarray, n: int) -> np.ndarray:
+    """Scene points given to each of ``n`` objects ``(n,)``."""
+    return np.bincount(owner[owner >= 0], minlength=n)
 
 
 def predict(prev: np.ndarray, dx: np.ndarray, drot: np.ndarray, alpha: float) -> np.ndarray:
@@ -167,15 +214,19 @@ def scene_points(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam:
     return pts[keep], cols[keep]
 
 
-def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, models: list[ObjectModel],
+def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, models: list[SurfaceModel],
           start: np.ndarray, cfg: TrackerConfig = TrackerConfig(), found: np.ndarray | None = None,
-          redetect: Redetect | None = None, progress: Callable[[], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+          redetect: Redetect | None = None, progress: Callable[[], None] | None = None,
+          rest: RestState | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Poses ``(T, n, 7)`` and status ``(T, n)`` over frames ``rgb (T, H, W, 3)``,
     ``depth (T, H, W)``, from world poses ``start (n, 7)`` at frame 0 (``found (n,)``
     says which of them are real). A lost object is searched for locally, from its last good
     pose, in every frame; once lost for ``cfg.redetect_after`` frames it is also searched
     for globally with ``redetect``, then less and less often. A lost object's
-    stored pose is its last good one (or prediction), marked LOST."""
+    stored pose is its last good one (or prediction), marked LOST.
+
+    With ``rest``, objects at rest are settled on their support (:mod:`hsp.perception.rest`),
+    and one that is hidden behind another while at rest is held there, marked SUSPECT."""
     T_frames, n = len(depth), len(models)
     poses = np.zeros((T_frames, n, 7))
     status = np.full((T_frames, n), TrackStatus.OK, np.int64)
@@ -183,7 +234,10 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
     known = np.ones(n, bool) if found is None else found.copy()
     lost_for = np.where(known, 0, 1)
     dx, drot = np.zeros((n, 3)), np.zeros((n, 3))
+    if rest is not None:
+        rest.start(start, known)
     for t in range(T_frames):
+        turned = np.zeros(n, bool)
         pts, cols = scene_points(rgb[t], depth[t], K, T_world_cam, cfg)
         pred = predict(prev, dx, drot, cfg.damping)
         owner = assign_points(pts, cols, models, pred, cfg, known)
@@ -192,18 +246,30 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
             sel = sel[:: -(-sel.size // cfg.max_points)] if sel.size > cfg.max_points else sel  # a wheel's top: thousands
             if sel.size < cfg.min_points:
                 poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
+                if rest is not None and rest.anchored[i] and seen_through(
+                        models[i].surface, models[i].normals, pose_to_matrix(pred[i]), depth[t], K,
+                        T_world_cam) <= rest.cfg.max_seen_through:
+                    status[t, i] = TrackStatus.SUSPECT  # hidden where it rests: held there
                 continue
             local = (pts[sel] - pred[i, :3]) @ pose_to_matrix(pred[i])[:3, :3]
             corr, rmse, inliers = _icp(models[i], local, cfg)  # no culling here: it lost objects mid-turn
             if _fit_cost(models[i], local @ corr[:3, :3].T + corr[:3, 3], cfg) < (1 - cfg.min_gain) * _fit_cost(models[i], local, cfg):
                 poses[t, i] = compose(pred[i], pose_from_matrix(np.linalg.inv(corr)))
+                local = local @ corr[:3, :3].T + corr[:3, 3]
             else:  # no better than the prediction: a half-hidden canvas would slide along itself
                 poses[t, i] = pred[i]
+            flip = unflip(models[i], local, cols[sel], cfg) if models[i].can_flip else None
+            if flip is not None:
+                poses[t, i] = compose(poses[t, i], pose_from_matrix(flip))
+                turned[i] = True
             if inliers < cfg.min_points:
                 status[t, i] = TrackStatus.LOST
             elif rmse > cfg.suspect_rmse_m:
                 status[t, i] = TrackStatus.SUSPECT
         poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
+        if rest is not None:
+            measured = known & (status[t] != TrackStatus.LOST) & (owner_count(owner, n) >= cfg.min_points)
+            poses[t] = rest.apply(poses[t], measured)
         k = lost_for // cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
         search = np.flatnonzero((lost_for % cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
         if redetect is not None and search.size:
@@ -215,7 +281,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
             moved = good & (lost_for == 0)  # a velocity needs two good frames in a row
             dx[moved] = poses[t, moved, :3] - prev[moved, :3]
             drot[moved] = (Rotation.from_quat(poses[t, moved, 3:]) * Rotation.from_quat(prev[moved, 3:]).inv()).as_rotvec()
-        dx[~good], drot[~good] = 0.0, 0.0
+        dx[~good | turned], drot[~good | turned] = 0.0, 0.0  # a half turn is a correction, not motion
         prev[good] = poses[t, good]
         lost_for = np.where(good, 0, lost_for + 1)
         if progress is not None:

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Range = tuple[float, float]
 Vec3 = tuple[float, float, float]
-Symmetry = Literal["none", "z_continuous", "z_2fold", "z_4fold", "z_6fold", "cube"]
+Symmetry = Literal["none", "x_2fold", "z_continuous", "z_2fold", "z_4fold", "z_6fold", "cube"]
 
 
 class _Strict(BaseModel):

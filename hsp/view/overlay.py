@@ -15,20 +15,12 @@ import numpy as np
 
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
-from hsp.geometry import inverse, transform_points
+from hsp.geometry import transform_points
+from hsp.perception.pointcloud import project
 from hsp.sim.render import Mesh
 
 STATUS_BGR = {TrackStatus.OK: (80, 200, 60), TrackStatus.SUSPECT: (0, 180, 255), TrackStatus.LOST: (40, 40, 230)}
 TRUTH_BGR = (255, 255, 255)
-
-
-def project(points_world: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel coordinates ``(N, 2)`` (u right, v down; pixel centres at integers) of world
-    points ``(N, 3)`` and their depth along the optical axis ``(N,)``."""
-    pc = transform_points(inverse(T_world_cam), points_world)
-    z = pc[:, 2]
-    uv = (pc[:, :2] / np.maximum(z, 1e-9)[:, None]) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
-    return uv, z
 
 
 def _mask(mesh: Mesh, pose: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -6,7 +6,7 @@ import pytest
 from hsp.perception.initialize import initialize
 from hsp.perception.metrics import rotation_error_deg
 from hsp.perception.pointcloud import backproject
-from hsp.perception.tracker import ObjectModel, TrackerConfig, track
+from hsp.perception.tracker import SurfaceModel, TrackerConfig, track
 from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.reader import read_recording
 from hsp.recording.record import RecordConfig, record
@@ -28,7 +28,7 @@ def episode(tasks, tmp_path_factory):
 def test_tracking_from_the_first_pose_stays_within_millimetres(episode):
     task, rec, gt, meshes = episode
     n = 60
-    models = [ObjectModel(m, 1500) for m in meshes]
+    models = [SurfaceModel(m, 1500) for m in meshes]
     poses, status = track(rec.rgb[:n], rec.depth[:n], rec.K, rec.T_world_cam, models, gt.poses[0], TrackerConfig())
     err_mm = np.linalg.norm(poses[:, :, :3] - gt.poses[:n, :, :3], axis=-1) * 1000
     assert np.median(err_mm) < 3.0, np.median(err_mm, axis=0)
@@ -43,7 +43,7 @@ def test_initialiser_finds_the_blocks_on_the_table(episode):
     task, rec, gt, meshes = episode
     pts, cols = backproject(rec.depth[0], rec.rgb[0], rec.K, rec.T_world_cam, 2)
     keep = pts[:, 2] > 0.003
-    poses, found = initialize(task, pts[keep], cols[keep], [ObjectModel(m, 1500) for m in meshes], rec.T_world_cam[:3])
+    poses, found = initialize(task, pts[keep], cols[keep], [SurfaceModel(m, 1500) for m in meshes], rec.T_world_cam[:3])
     assert found[0] and np.linalg.norm(poses[0, :3] - gt.poses[0, 0, :3]) < 0.005, "the hand, in the air"
     for i in range(1, len(task.objects)):
         assert found[i]

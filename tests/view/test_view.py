@@ -6,7 +6,8 @@ import pytest
 from hsp.dataset.features import TrackStatus
 from hsp.sim.camera import CameraConfig, look_at_pose
 from hsp.sim.render import RgbdRenderer, load_mesh
-from hsp.view.overlay import _mask, draw_frame, project
+from hsp.perception.pointcloud import project
+from hsp.view.overlay import _mask, draw_frame
 from hsp.view.rerun_log import write_rrd
 from hsp.view.timeline import bands, write_timeline
 

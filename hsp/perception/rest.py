@@ -1,0 +1,151 @@
+"""Objects at rest: a physical prior for the tracker.
+
+An object that has stopped moving on its support stands upright (one of its resting axes
+points straight up), stays where it came to rest, and, on the table, touches it. ICP on a
+few noisy points of a small or half-hidden object leaves its tilt and its slide along a
+flat face loosely constrained; at rest neither can change, so the anchored pose replaces
+those degrees of freedom and ICP keeps only the heading (yaw). An anchored object is
+released as soon as ICP finds it more than ``release_m`` away: it is being moved.
+
+Anchoring is also what lets the tracker hold an object that another one covers (a nut
+under the socket): it is still where it came to rest, as long as something is seen in front
+of it and nothing is seen through it (:func:`seen_through`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hsp.perception.pointcloud import project
+
+CUBE_AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+UPRIGHT = np.array([[0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class RestConfig:
+    still_m: float = 0.003
+    """Radius (m) of the ball an object must stay in to count as still (tracking noise on
+    a small nut reaches 2 mm)."""
+    rest_frames: int = 10
+    """Frames an object must stay still to be anchored (longer than a hand's pause with a
+    held block, 0.1–0.5 s at 15 frames/s)."""
+    release_m: float = 0.01
+    """ICP's distance (m) from the anchor beyond which the object is moving again (a block
+    covered by another can pull ICP 5 mm off its bottom face)."""
+    refine_m: float = 0.003
+    """Only measurements this close to the anchor's height refine it; horizontally, all
+    within ``release_m`` do (a start a few millimetres off is corrected)."""
+    max_tilt_deg: float = 30.0
+    """An object tilted further from every resting axis when it stops is not resting on it
+    (it leans on something); once anchored, ICP's tilt is noise."""
+    table_contact_m: float = 0.01
+    """A resting object whose lowest point is this close to the table stands on it."""
+    max_seen_through: float = 0.2
+    """Largest share of an unseen object's projected surface where depth readings lie
+    behind it, for it to count as hidden (held) rather than gone (lost): a socket's wall
+    hugs a nut within millimetres, so what is in front cannot be told from what is on it."""
+
+
+def upright(q: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
+    """Orientation ``q (4,)`` turned by the smallest rotation that points the nearest of the
+    body ``axes (A, 3)`` straight up, and the tilt (deg) it removed."""
+    R = Rotation.from_quat(q)
+    up = R.apply(axes)  # (A, 3) in the world
+    a = up[np.argmax(up[:, 2])]
+    tilt = float(np.degrees(np.arccos(np.clip(a[2], -1.0, 1.0))))
+    axis = np.cross(a, [0.0, 0.0, 1.0])
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return R.as_quat(), tilt
+    return (Rotation.from_rotvec(axis / s * np.radians(tilt)) * R).as_quat(), tilt
+
+
+def seen_through(surface: np.ndarray, normals: np.ndarray, pose_matrix: np.ndarray, depth: np.ndarray, K: np.ndarray,
+                 T_world_cam: np.ndarray, margin_m: float = 0.01) -> float:
+    """Share of the object's camera-facing surface samples (object frame ``(M, 3)``, with
+    normals) at pose ``pose_matrix (4, 4)`` whose pixel reads at least ``margin_m`` deeper:
+    the camera sees past where the object would be. 1 when none project into the image
+    with a reading."""
+    pts = surface @ pose_matrix[:3, :3].T + pose_matrix[:3, 3]
+    nrm = normals @ pose_matrix[:3, :3].T
+    camera = T_world_cam[:3]
+    pts = pts[np.sum(nrm * (camera - pts), axis=1) > 0]
+    uv, z = project(pts, K, T_world_cam)
+    u, v = np.round(uv).astype(int).T
+    inside = (z > 0) & (u >= 0) & (v >= 0) & (u < depth.shape[1]) & (v < depth.shape[0])
+    d = depth[v[inside], u[inside]]
+    seen = d > 0
+    if not seen.any():
+        return 1.0
+    return float(np.mean(d[seen] > z[inside][seen] + margin_m))
+
+
+@dataclass
+class RestState:
+    """Per object: its resting axes (``None``: never rests, as the end-effector), how long it
+    has been still, and its anchor while at rest."""
+
+    axes: list[np.ndarray | None]
+    lowest: list[np.ndarray]
+    """Model surface samples, to find the lowest point of an upright pose."""
+    cfg: RestConfig = field(default_factory=RestConfig)
+
+    def __post_init__(self) -> None:
+        n = len(self.axes)
+        self.still = np.zeros(n, int)
+        self.anchored = np.zeros(n, bool)
+        self.anchor = np.zeros((n, 3))
+        self.still_at = np.zeros((n, 3))
+        self._count = np.zeros(n, int)
+
+    def start(self, poses: np.ndarray, found: np.ndarray) -> None:
+        """Anchor the objects found at the start that can rest (the layout rests them)."""
+        self.still_at = poses[:, :3].copy()
+        for i in np.flatnonzero(found):
+            if self.axes[i] is not None:
+                self._anchor(i, poses[i])
+
+    def _anchor(self, i: int, pose: np.ndarray) -> None:
+        self.anchored[i], self.anchor[i], self._count[i] = True, pose[:3], 1
+
+    def _settle(self, i: int, q_up: np.ndarray) -> np.ndarray:
+        """The resting pose at the anchor, upright ``q_up``; on the table when its lowest
+        point is near it."""
+        x = self.anchor[i].copy()
+        low = x[2] + float(np.min(Rotation.from_quat(q_up).apply(self.lowest[i])[:, 2]))
+        if abs(low) < self.cfg.table_contact_m:
+            x[2] -= low
+        return np.concatenate([x, q_up])
+
+    def apply(self, poses: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """One frame: the tracked ``poses (n, 7)`` with anchored objects settled;
+        ``measured (n,)`` says which objects ICP saw this frame. Anchors are refined by the
+        mean of the measurements near them and released when one is far."""
+        out = poses.copy()
+        for i, axes in enumerate(self.axes):
+            if axes is None:
+                continue
+            if self.anchored[i] and measured[i]:
+                if np.linalg.norm(poses[i, :3] - self.anchor[i]) > self.cfg.release_m:
+                    self.anchored[i], self.still[i] = False, 0
+                    continue
+                self._count[i] = min(self._count[i] + 1, 30)
+                step = (poses[i, :3] - self.anchor[i]) / self._count[i]
+                if abs(poses[i, 2] - self.anchor[i, 2]) > self.cfg.refine_m:
+                    step[2] = 0.0  # pulled up by a block put on top of it
+                self.anchor[i] += step
+            q_up, tilt = upright(poses[i, 3:], axes)
+            if self.anchored[i]:
+                out[i] = self._settle(i, q_up)
+                continue
+            if not measured[i] or np.linalg.norm(poses[i, :3] - self.still_at[i]) > self.cfg.still_m:
+                self.still[i], self.still_at[i] = 0, poses[i, :3]
+            self.still[i] += measured[i]
+            if self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg:
+                self._anchor(i, poses[i])
+                out[i] = self._settle(i, q_up)
+        return out
