@@ -179,8 +179,8 @@ def label(
 
     try:
         if policy is not None:  # hsp.labeling.em.em_label runs EM given the trained networks as a score model
-            raise HspError(f"--policy {policy}: trained policies cannot be loaded yet; `hsp train` (issue 7) will write "
-                           "them. EM itself is hsp.labeling.em.em_label, which takes any score model.")
+            raise HspError(f"--policy {policy}: trained policies cannot be loaded yet: `hsp train`, "
+                           "which will write them, does not exist yet. EM itself is hsp.labeling.em.em_label, which takes any score model.")
         params = load_params(params_file)
         cfg = section(params, "label", PriorConfig, ignore=("em_iterations",))
         t = load_task(task)

@@ -98,7 +98,7 @@ def test_unknown_camera_key_is_named(tmp_path):
 
 def test_label_with_a_policy_says_training_is_missing(tmp_path):
     result = runner.invoke(app, ["label", "painting", "--dataset", str(tmp_path), "--policy", str(tmp_path / "model")])
-    assert result.exit_code == 1 and "issue 7" in result.output and "em_label" in result.output
+    assert result.exit_code == 1 and "hsp train" in result.output and "em_label" in result.output
 
 
 def test_view_writes_video_timeline_and_rerun_recording(tmp_path):

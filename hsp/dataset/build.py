@@ -9,11 +9,9 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
-import os
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +21,7 @@ from rich.progress import Progress
 from hsp.dataset.features import TrackStatus
 from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
+from hsp.parallel import one_omp_thread, pin_to_one_core
 from hsp.perception.episode import object_models, track_recording
 from hsp.perception.metrics import auc, episode_errors, match_identical
 from hsp.perception.tracker import TrackerConfig
@@ -100,38 +99,21 @@ def _track_one(job: TrackJob) -> TrackOutcome:
 
 
 def _tracked_episodes(jobs: list[TrackJob], workers: int, outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
-    """Episodes in order, tracked in ``workers`` processes (one Open3D thread each)."""
-    with Progress() as progress, _one_omp_thread():
+    """Episodes in order, tracked in ``workers`` processes, each on a core of its own. One
+    worker is a process too: Open3D's parallel reductions round differently from run to run
+    on more than one thread, and the dataset must not depend on the run or on how many
+    processes made it."""
+    with Progress() as progress, one_omp_thread():
         bar = progress.add_task(f"track {jobs[0].task}", total=len(jobs))
-        pool = None
-        if workers == 1:
-            results: Iterator[TrackOutcome] = map(_track_one, jobs)
-        else:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-            results = pool.map(_track_one, jobs)
+        ctx = multiprocessing.get_context("spawn")
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=pin_to_one_core, initargs=(ctx.Value("i", 0),))
         try:
-            for outcome in results:
+            for outcome in pool.map(_track_one, jobs):
                 outcomes.append(outcome)
                 progress.advance(bar)
                 yield outcome.episode
         finally:
-            if pool is not None:
-                pool.shutdown(cancel_futures=True)
-
-
-@contextmanager
-def _one_omp_thread() -> Iterator[None]:
-    """``OMP_NUM_THREADS=1`` while the pool lives: workers are spawned on demand and read it
-    before they import Open3D (two OpenMP threads per worker on two cores spin and slow down)."""
-    saved = os.environ.get("OMP_NUM_THREADS")
-    os.environ["OMP_NUM_THREADS"] = "1"
-    try:
-        yield
-    finally:
-        if saved is None:
-            del os.environ["OMP_NUM_THREADS"]
-        else:
-            os.environ["OMP_NUM_THREADS"] = saved
+            pool.shutdown(cancel_futures=True)
 
 
 def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall_seconds: float) -> dict[str, float | int | str]:

@@ -3,9 +3,9 @@
 An object that has stopped moving on its support stands upright (one of its resting axes
 points straight up), stays where it came to rest, and, on the table, touches it. ICP on a
 few noisy points of a small or half-hidden object leaves its tilt and its slide along a
-flat face loosely constrained; at rest neither can change, so the anchored pose replaces
-those degrees of freedom and ICP keeps only the heading (yaw). An anchored object is
-released as soon as ICP finds it more than ``release_m`` away: it is being moved.
+flat face loosely constrained; at rest neither can change, so the anchor (the running mean
+of ICP's positions and headings since the object stopped) replaces them. An anchored object
+is released as soon as ICP finds it more than ``release_m`` away: it is being moved.
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as something is seen in front
@@ -35,7 +35,13 @@ class RestConfig:
     held block, 0.1–0.5 s at 15 frames/s)."""
     release_m: float = 0.01
     """ICP's distance (m) from the anchor beyond which the object is moving again (a block
-    covered by another can pull ICP 5 mm off its bottom face)."""
+    covered by another can pull ICP 5 mm up off its bottom face)..."""
+    release_xy_m: float = 0.005
+    """... or its horizontal distance (a bucket the brush knocks)."""
+    turn_deg: float = 20.0
+    """A heading this far from the anchor's is a turn (a nut turned by the wrench), not noise."""
+    average_frames: int = 30
+    """Anchors average the last this many measurements or so (a running mean, then an EMA)."""
     refine_m: float = 0.003
     """Only measurements this close to the anchor's height refine it; horizontally, all
     within ``release_m`` do (a start a few millimetres off is corrected)."""
@@ -84,42 +90,77 @@ def seen_through(surface: np.ndarray, normals: np.ndarray, pose_matrix: np.ndarr
     return float(np.mean(d[seen] > z[inside][seen] + margin_m))
 
 
+def _heading_change(q: np.ndarray, q_anchor: np.ndarray, period: float) -> float | None:
+    """Turn (rad) about the world's vertical from ``q_anchor`` to ``q``, both upright,
+    wrapped to the symmetry ``period`` (0: continuous, no heading); None when a different
+    body axis is up (a cube put down on another face)."""
+    R = Rotation.from_quat(q).as_matrix() @ Rotation.from_quat(q_anchor).as_matrix().T
+    if R[2, 2] < np.cos(np.pi / 4):
+        return None
+    if period == 0.0:
+        return 0.0
+    turn = np.arctan2(R[1, 0], R[0, 0])
+    return float((turn + period / 2) % period - period / 2)
+
+
 @dataclass
 class RestState:
     """Per object: its resting axes (``None``: never rests, as the end-effector), how long it
-    has been still, and its anchor while at rest."""
+    has been still, and its anchor (position and upright orientation) while at rest."""
 
     axes: list[np.ndarray | None]
     lowest: list[np.ndarray]
     """Model surface samples, to find the lowest point of an upright pose."""
+    periods: list[float]
+    """Symmetry period (rad) of each object's heading about its up axis; 0 for none at all."""
     cfg: RestConfig = field(default_factory=RestConfig)
 
     def __post_init__(self) -> None:
         n = len(self.axes)
         self.still = np.zeros(n, int)
         self.anchored = np.zeros(n, bool)
-        self.anchor = np.zeros((n, 3))
+        self.anchor = np.zeros((n, 7))
         self.still_at = np.zeros((n, 3))
-        self._count = np.zeros(n, int)
+        self._count = np.zeros(n, int)  # measurements in the position average
+        self._turns = np.zeros(n, int)  # and in the heading average, restarted after a hidden spell
 
     def start(self, poses: np.ndarray, found: np.ndarray) -> None:
         """Anchor the objects found at the start that can rest (the layout rests them)."""
         self.still_at = poses[:, :3].copy()
         for i in np.flatnonzero(found):
-            if self.axes[i] is not None:
-                self._anchor(i, poses[i])
+            axes = self.axes[i]
+            if axes is not None:
+                self._anchor(i, poses[i, :3], upright(poses[i, 3:], axes)[0])
 
-    def _anchor(self, i: int, pose: np.ndarray) -> None:
-        self.anchored[i], self.anchor[i], self._count[i] = True, pose[:3], 1
+    def _anchor(self, i: int, x: np.ndarray, q_up: np.ndarray) -> None:
+        self.anchored[i], self._count[i], self._turns[i] = True, 1, 1
+        self.anchor[i] = np.concatenate([x, q_up])
 
-    def _settle(self, i: int, q_up: np.ndarray) -> np.ndarray:
-        """The resting pose at the anchor, upright ``q_up``; on the table when its lowest
-        point is near it."""
-        x = self.anchor[i].copy()
-        low = x[2] + float(np.min(Rotation.from_quat(q_up).apply(self.lowest[i])[:, 2]))
+    def _settled(self, i: int) -> np.ndarray:
+        """The anchored pose, on the table when its lowest point is near it."""
+        out = self.anchor[i].copy()
+        low = out[2] + float(np.min(Rotation.from_quat(out[3:]).apply(self.lowest[i])[:, 2]))
         if abs(low) < self.cfg.table_contact_m:
-            x[2] -= low
-        return np.concatenate([x, q_up])
+            out[2] -= low
+        return out
+
+    def _refine(self, i: int, pose: np.ndarray, q_up: np.ndarray) -> bool:
+        """Average a measurement into the anchor; False when it shows the object moving."""
+        a = self.anchor[i]
+        if np.linalg.norm(pose[:3] - a[:3]) > self.cfg.release_m or np.linalg.norm(pose[:2] - a[:2]) > self.cfg.release_xy_m:
+            return False
+        turn = _heading_change(q_up, a[3:], self.periods[i])
+        self._count[i] = min(self._count[i] + 1, self.cfg.average_frames)
+        step = (pose[:3] - a[:3]) / self._count[i]
+        if abs(pose[2] - a[2]) > self.cfg.refine_m:
+            step[2] = 0.0  # pulled up by a block put on top of it
+        a[:3] += step
+        if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):  # turned (a nut by the wrench): a new heading
+            a[3:], self._turns[i] = q_up, 1
+            return True
+        self._turns[i] = min(self._turns[i] + 1, self.cfg.average_frames)
+        a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._turns[i]]) * Rotation.from_quat(a[3:])).as_quat()
+        return True
 
     def apply(self, poses: np.ndarray, measured: np.ndarray) -> np.ndarray:
         """One frame: the tracked ``poses (n, 7)`` with anchored objects settled;
@@ -129,23 +170,19 @@ class RestState:
         for i, axes in enumerate(self.axes):
             if axes is None:
                 continue
-            if self.anchored[i] and measured[i]:
-                if np.linalg.norm(poses[i, :3] - self.anchor[i]) > self.cfg.release_m:
-                    self.anchored[i], self.still[i] = False, 0
-                    continue
-                self._count[i] = min(self._count[i] + 1, 30)
-                step = (poses[i, :3] - self.anchor[i]) / self._count[i]
-                if abs(poses[i, 2] - self.anchor[i, 2]) > self.cfg.refine_m:
-                    step[2] = 0.0  # pulled up by a block put on top of it
-                self.anchor[i] += step
             q_up, tilt = upright(poses[i, 3:], axes)
+            if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up):
+                self.anchored[i], self.still[i], self.still_at[i] = False, 0, poses[i, :3]
+                continue
             if self.anchored[i]:
-                out[i] = self._settle(i, q_up)
+                if not measured[i]:  # hidden (a nut under the socket may be turned): heading unknown
+                    self._turns[i] = 0
+                out[i] = self._settled(i)
                 continue
             if not measured[i] or np.linalg.norm(poses[i, :3] - self.still_at[i]) > self.cfg.still_m:
                 self.still[i], self.still_at[i] = 0, poses[i, :3]
             self.still[i] += measured[i]
             if self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg:
-                self._anchor(i, poses[i])
-                out[i] = self._settle(i, q_up)
+                self._anchor(i, poses[i, :3], q_up)
+                out[i] = self._settled(i)
         return out

@@ -53,6 +53,9 @@ class TrackerConfig:
     noise alone must not move an object along a direction its visible part leaves free."""
     max_points: int = 800
     """Scene points per object for ICP, evenly thinned beyond this."""
+    skip_ratio: float = 1.1
+    """ICP is skipped when the prediction's fit cost is within this factor of the cost at the
+    object's last ICP solution (a still wheel, nuts at rest): the prediction is as good."""
     flip_margin: float = 0.15
     """Share of an object's points whose colour a half-turned pose must explain better to
     replace ICP's (see :func:`unflip`)."""
@@ -129,10 +132,19 @@ def _icp(model: SurfaceModel, points_obj: np.ndarray, cfg: TrackerConfig,
     return T, float(result.inlier_rmse), int(len(result.correspondence_set))
 
 
+def _fit(model: SurfaceModel, local: np.ndarray, cfg: TrackerConfig) -> tuple[float, int, float]:
+    """Fit of points in the object frame to the model: mean truncated squared distance
+    (m²), and the inlier count and RMSE within the last gate."""
+    gate = cfg.gates_m[-1]
+    d = model.tree.query(local, distance_upper_bound=gate)[0]
+    inlier = d < gate
+    rmse = float(np.sqrt(np.mean(d[inlier] ** 2))) if inlier.any() else np.inf
+    return float(np.mean(np.minimum(d, gate) ** 2)), int(inlier.sum()), rmse
+
+
 def _fit_cost(model: SurfaceModel, local: np.ndarray, cfg: TrackerConfig) -> float:
     """Mean truncated squared distance (m²) of points in the object frame to the model."""
-    d = model.tree.query(local, distance_upper_bound=cfg.gates_m[-1])[0]
-    return float(np.mean(np.minimum(d, cfg.gates_m[-1]) ** 2))
+    return _fit(model, local, cfg)[0]
 
 
 def colour_agreement(model: SurfaceModel, local: np.ndarray, cols: np.ndarray, cfg: TrackerConfig) -> int:
@@ -174,15 +186,19 @@ def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel],
     touching objects (a hand on a block, nuts on a wheel) thus never share points."""
     best = np.full(len(pts), np.inf)
     owner = np.full(len(pts), -1)
+    radius = np.array([m.radius for m in models]) + cfg.crop_margin_m
+    d2 = np.sum(pts**2, axis=1)[:, None] - 2 * pts @ pred[:, :3].T + np.sum(pred[:, :3] ** 2, axis=1)  # (N, n)
     for i, model in enumerate(models):
         if active is not None and not active[i]:
             continue
-        cand = np.flatnonzero(np.linalg.norm(pts - pred[i, :3], axis=1) < model.radius + cfg.crop_margin_m)
+        cand = np.flatnonzero(d2[:, i] < radius[i] ** 2)
         cand = cand[model.colour_mask(cols[cand], cfg.colour_tolerance)]
+        if cand.size > 2 * cfg.max_points:  # a wheel's top: ICP takes max_points of them anyway
+            cand = cand[:: cand.size // (2 * cfg.max_points)]
         if cand.size == 0:
             continue
-        surface = np.asarray(model.cloud.points) @ pose_to_matrix(pred[i])[:3, :3].T + pred[i, :3]
-        d = cKDTree(surface).query(pts[cand], distance_upper_bound=cfg.crop_margin_m)[0]
+        local = (pts[cand] - pred[i, :3]) @ pose_to_matrix(pred[i])[:3, :3]
+        d = model.tree.query(local, distance_upper_bound=cfg.crop_margin_m)[0]
         closer = d < best[cand]
         best[cand[closer]] = d[closer]
         owner[cand[closer]] = i
@@ -234,6 +250,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
     known = np.ones(n, bool) if found is None else found.copy()
     lost_for = np.where(known, 0, 1)
     dx, drot = np.zeros((n, 3)), np.zeros((n, 3))
+    fitted = np.zeros(n)  # fit cost at each object's last ICP solution
     if rest is not None:
         rest.start(start, known)
     for t in range(T_frames):
@@ -251,17 +268,22 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                         T_world_cam) <= rest.cfg.max_seen_through:
                     status[t, i] = TrackStatus.SUSPECT  # hidden where it rests: held there
                 continue
-            local = (pts[sel] - pred[i, :3]) @ pose_to_matrix(pred[i])[:3, :3]
-            corr, rmse, inliers = _icp(models[i], local, cfg)  # no culling here: it lost objects mid-turn
-            if _fit_cost(models[i], local @ corr[:3, :3].T + corr[:3, 3], cfg) < (1 - cfg.min_gain) * _fit_cost(models[i], local, cfg):
-                poses[t, i] = compose(pred[i], pose_from_matrix(np.linalg.inv(corr)))
-                local = local @ corr[:3, :3].T + corr[:3, 3]
-            else:  # no better than the prediction: a half-hidden canvas would slide along itself
-                poses[t, i] = pred[i]
+            pose = pred[i]
+            local = (pts[sel] - pose[:3]) @ pose_to_matrix(pose)[:3, :3]
+            cost, inliers, rmse = _fit(models[i], local, cfg)
+            if cost > cfg.skip_ratio * fitted[i]:  # else the prediction fits as well as the last solution
+                corr, rmse, inliers = _icp(models[i], local, cfg)  # no culling here: it lost objects mid-turn
+                moved = local @ corr[:3, :3].T + corr[:3, 3]
+                cost_icp = _fit_cost(models[i], moved, cfg)
+                if cost_icp < (1 - cfg.min_gain) * cost:
+                    pose = compose(pose, pose_from_matrix(np.linalg.inv(corr)))
+                    local, cost = moved, cost_icp
+                # else no better than the prediction: a half-hidden canvas would slide along itself
+                fitted[i] = cost
             flip = unflip(models[i], local, cols[sel], cfg) if models[i].can_flip else None
             if flip is not None:
-                poses[t, i] = compose(poses[t, i], pose_from_matrix(flip))
-                turned[i] = True
+                pose, turned[i] = compose(pose, pose_from_matrix(flip)), True
+            poses[t, i] = pose
             if inliers < cfg.min_points:
                 status[t, i] = TrackStatus.LOST
             elif rmse > cfg.suspect_rmse_m:

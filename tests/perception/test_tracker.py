@@ -3,9 +3,12 @@
 import numpy as np
 import pytest
 
+from hsp.dataset.features import TrackStatus
+from hsp.geometry import transform_points
+from hsp.perception.episode import object_models, rest_state
 from hsp.perception.initialize import initialize
 from hsp.perception.metrics import rotation_error_deg
-from hsp.perception.pointcloud import backproject
+from hsp.perception.pointcloud import backproject, project
 from hsp.perception.tracker import SurfaceModel, TrackerConfig, track
 from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.reader import read_recording
@@ -49,3 +52,24 @@ def test_initialiser_finds_the_blocks_on_the_table(episode):
         assert found[i]
         assert np.linalg.norm(poses[i, :3] - gt.poses[0, i, :3]) < 0.005
         assert rotation_error_deg(poses[i, 3:], gt.poses[0, i, 3:], "cube") < 10.0
+
+
+@pytest.mark.parametrize("shift_m, expected", [(-0.05, TrackStatus.SUSPECT), (0.03, TrackStatus.LOST)])
+def test_a_resting_block_hidden_by_something_nearer_is_held_and_one_seen_through_is_lost(episode, shift_m, expected):
+    """From frame 10 on, the pixels of the block farthest from the hand read 5 cm nearer and
+    grey (something covers it) or 3 cm deeper (it is gone): held where it rests, marked
+    suspect, in the first case; lost in the second."""
+    task, rec, gt, meshes = episode
+    n, start = 25, 10
+    models = object_models(task, TrackerConfig(), 0)
+    i = 1 + int(np.argmax(np.linalg.norm(gt.poses[0, 1:, :3] - gt.poses[0, 0, :3], axis=1)))
+    uv, _ = project(transform_points(gt.poses[0, i], models[i].surface), rec.K, rec.T_world_cam)
+    (u0, v0), (u1, v1) = np.floor(uv.min(axis=0)).astype(int) - 4, np.ceil(uv.max(axis=0)).astype(int) + 4
+    rgb, depth = rec.rgb[:n].copy(), rec.depth[:n].copy()
+    depth[start:, v0:v1, u0:u1] += shift_m
+    rgb[start:, v0:v1, u0:u1] = 128
+    poses, status = track(rgb, depth, rec.K, rec.T_world_cam, models, gt.poses[0], TrackerConfig(),
+                          rest=rest_state(task, models))
+    assert (status[start + 1:, i] == expected).all(), status[:, i]
+    if expected == TrackStatus.SUSPECT:
+        assert np.linalg.norm(poses[start:, i, :3] - gt.poses[start:n, i, :3], axis=1).max() < 0.003

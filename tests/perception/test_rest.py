@@ -1,0 +1,70 @@
+"""Objects at rest: upright, anchored, released, and hidden versus gone."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState, seen_through, upright
+
+BOX = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (-0.02, 0.02)])
+"""Corners of a 4 cm cube around its centre: enough for the lowest point."""
+
+
+def _pose(xyz, rotvec):
+    return np.concatenate([xyz, Rotation.from_rotvec(rotvec).as_quat()])
+
+
+def test_upright_removes_the_tilt_and_keeps_the_heading():
+    q = (Rotation.from_euler("z", 30, degrees=True) * Rotation.from_euler("x", 8, degrees=True)).as_quat()
+    q_up, tilt = upright(q, UPRIGHT)
+    R = Rotation.from_quat(q_up)
+    assert abs(tilt - 8.0) < 1e-6
+    assert np.allclose(R.apply([0, 0, 1]), [0, 0, 1], atol=1e-9)
+    x = R.apply([1, 0, 0])
+    assert abs(np.degrees(np.arctan2(x[1], x[0])) - 30.0) < 0.5
+
+
+def test_a_cube_stands_on_whichever_face_is_down():
+    q = (Rotation.from_euler("x", 90 + 5, degrees=True)).as_quat()  # on its side, 5 degrees off
+    q_up, tilt = upright(q, CUBE_AXES)
+    assert abs(tilt - 5.0) < 1e-6
+    up = Rotation.from_quat(q_up).apply(CUBE_AXES)
+    assert np.isclose(up[:, 2].max(), 1.0)
+
+
+def test_a_still_object_is_anchored_settled_on_the_table_and_released_when_moved():
+    cfg = RestConfig(rest_frames=3)
+    rest = RestState([None, CUBE_AXES], [BOX, BOX], [0.0, np.pi / 2], cfg)
+    rest.start(np.zeros((2, 7)), np.array([True, False]))  # the cube not found at the start
+    rng = np.random.default_rng(0)
+    hand = _pose([0.3, 0.0, 0.3], [0, 0, 0])
+    out = None
+    for _ in range(4):  # 3 mm above the table, tilted 4 degrees, jittering by 0.5 mm
+        cube = _pose([0.5, 0.1, 0.023] + rng.normal(0, 0.0005, 3), [np.radians(4), 0, 0])
+        out = rest.apply(np.stack([hand, cube]), np.array([True, True]))
+    assert rest.anchored[1] and not rest.anchored[0]
+    assert np.allclose(out[0], hand), "the end-effector never rests"
+    assert abs(out[1, 2] - 0.02) < 1e-9, "its lowest point is on the table"
+    assert np.isclose(Rotation.from_quat(out[1, 3:]).apply(CUBE_AXES)[:, 2].max(), 1.0)
+    held = rest.apply(np.stack([hand, _pose([0.9, 0.9, 0.9], [0, 0, 0])]), np.array([True, False]))
+    assert np.allclose(held[1, :3], out[1, :3]), "unseen, it stays where it rests"
+    lifted = _pose([0.5, 0.1, 0.05], [0, 0, 0])
+    moved = rest.apply(np.stack([hand, lifted]), np.array([True, True]))
+    assert not rest.anchored[1] and np.allclose(moved[1], lifted), "3 cm up: it is being moved"
+
+
+def test_a_hidden_object_is_told_from_a_gone_one():
+    """A camera 1 m above looking down at a cube on the table: a reading nearer than the
+    cube hides it; one behind it means the camera sees where the cube would be."""
+    K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
+    T_world_cam = np.array([0, 0, 1.0, 1.0, 0, 0, 0])  # optical axis down
+    g = np.linspace(-0.02, 0.02, 9)
+    top = np.array([[x, y, 0.02] for x in g for y in g])
+    normals = np.tile([0.0, 0.0, 1.0], (len(top), 1))
+    M = np.eye(4)
+    M[:3, 3] = [0, 0, 0.02]
+    depth = np.full((480, 640), 1.0, np.float32)  # the table
+    assert seen_through(top, normals, M, depth, K, T_world_cam) == 1.0
+    depth[:] = 0.90  # a hand 6 cm above the cube's top
+    assert seen_through(top, normals, M, depth, K, T_world_cam) == 0.0
+    depth[:] = 0.0  # no readings: no evidence that it is hidden
+    assert seen_through(top, normals, M, depth, K, T_world_cam) == 1.0
