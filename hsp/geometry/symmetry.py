@@ -31,3 +31,20 @@ def symmetry_rotations(symmetry: str, resting: bool = False) -> np.ndarray:
     if symmetry == "z_continuous" and resting:
         return z_rotations(CONTINUOUS_STEPS)
     raise ValueError(f"{symmetry!r} has no finite set of symmetry rotations")
+
+
+def canonical_orientations(q: np.ndarray, symmetry: str) -> np.ndarray:
+    """Orientations ``(H, 4)`` of one object over an episode replaced by a symmetric
+    equivalent, so that a symmetric object's frame means the same in every recording: for
+    ``z_continuous`` the turn about the body z axis is removed in every frame (its heading
+    cannot be seen); for a finite group, the equivalent closest to the world axes at the
+    first frame is kept for the whole episode (no jumps where two are equally close)."""
+    R = Rotation.from_quat(q).as_matrix()
+    if symmetry == "z_continuous":  # argmax over θ of trace(R·Rz(θ)), in closed form
+        theta = np.arctan2(R[:, 0, 1] - R[:, 1, 0], R[:, 0, 0] + R[:, 1, 1])
+        return (Rotation.from_matrix(R) * Rotation.from_euler("z", theta[:, None])).as_quat()
+    if symmetry == "none" or len(q) == 0:
+        return q
+    S = symmetry_rotations(symmetry)
+    m = int(np.argmax(np.einsum("ij,mji->m", R[0], S)))  # trace(R_0 · S_m)
+    return (Rotation.from_matrix(R) * Rotation.from_matrix(S[m])).as_quat()

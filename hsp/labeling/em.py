@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hsp.errors import HspError
-from hsp.labeling.label import EpisodeLabels, label_episode
+from hsp.labeling.label import EpisodeLabels, canonical_poses, label_episode
 from hsp.labeling.priors import PriorConfig, pairs_of
 from hsp.labeling.viterbi import Scores
 
@@ -45,11 +45,15 @@ def changed_fraction(old: list[EpisodeLabels], new: list[EpisodeLabels]) -> floa
     return diff / max(sum(len(a.tool) for a in old), 1)
 
 
-def em_label(episodes: list[tuple[np.ndarray, np.ndarray]], cfg: PriorConfig, fit: Fit, iterations: int) -> EmResult:
+def em_label(episodes: list[tuple[np.ndarray, np.ndarray]], cfg: PriorConfig, fit: Fit, iterations: int,
+             symmetries: list[str] | None = None) -> EmResult:
     """Labels of ``episodes`` (world poses, status): Viterbi over the priors, then up to
-    ``iterations`` rounds of fit → Viterbi over the fitted model, stopping when nothing changes."""
+    ``iterations`` rounds of fit → Viterbi over the fitted model, stopping when nothing changes.
+    With the objects' ``symmetries``, poses are made canonical first (the model sees them so)."""
     if iterations < 0:
         raise HspError(f"em_iterations must be ≥ 0, got {iterations}")
+    if symmetries is not None:
+        episodes = [(canonical_poses(w, symmetries), s) for w, s in episodes]
     labels = [label_episode(w, s, cfg) for w, s in episodes]
     changed: list[float] = []
     for round_ in range(iterations):

@@ -8,6 +8,7 @@ import numpy as np
 
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
+from hsp.geometry.symmetry import canonical_orientations
 from hsp.labeling.priors import PriorConfig, PriorScores
 from hsp.labeling.viterbi import Scores, Transition, viterbi
 
@@ -24,8 +25,20 @@ class EpisodeLabels:
     """w = p_k[o+, o*] per frame ``(H, 7)``, in the target's frame."""
 
 
-def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, scores: Scores | None = None) -> EpisodeLabels:
-    """Pseudo-labels of one episode of world poses ``(H, n, 7)`` with status ``(H, n)``.
+def canonical_poses(world: np.ndarray, symmetries: list[str]) -> np.ndarray:
+    """World poses ``(H, n, 7)`` with each symmetric object's orientation made canonical
+    (:func:`~hsp.geometry.symmetry.canonical_orientations`): way-points in a bucket's or a
+    wheel's frame then mean the same whatever heading the tracker gave it."""
+    out = world.copy()
+    for i, symmetry in enumerate(symmetries):
+        out[:, i, 3:] = canonical_orientations(world[:, i, 3:], symmetry)
+    return out
+
+
+def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, scores: Scores | None = None,
+                  symmetries: list[str] | None = None) -> EpisodeLabels:
+    """Pseudo-labels of one episode of world poses ``(H, n, 7)`` with status ``(H, n)``;
+    with the objects' ``symmetries``, way-points are in their canonical frames.
 
     ``scores`` replaces the priors (EM with trained networks); it must use the pair order
     of :func:`~hsp.labeling.priors.pairs_of`.
@@ -36,6 +49,8 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     if n < 2:
         raise HspError(f"{n} object(s): labelling needs the end-effector and at least one other object")
     ok = status != TrackStatus.LOST
+    if symmetries is not None:
+        world = canonical_poses(world, symmetries)
     prior = PriorScores(world, ok, cfg)
     path = viterbi(scores or prior, Transition(cfg.gamma, cfg.beta))
     pair = prior.pairs[path.pair]

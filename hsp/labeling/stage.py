@@ -11,14 +11,16 @@ import numpy as np
 import pandas as pd
 from rich.progress import track
 
-from hsp.dataset.build import list_recordings
+from hsp.dataset.build import identical_groups, list_recordings
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
-from hsp.labeling.label import EpisodeLabels, label_episode
+from hsp.geometry import compose, relative
+from hsp.labeling.label import EpisodeLabels, canonical_poses, label_episode
 from hsp.labeling.metrics import label_metrics
 from hsp.labeling.priors import PriorConfig
-from hsp.recording.ground_truth import read_ground_truth
+from hsp.perception.metrics import match_identical
+from hsp.recording.ground_truth import GroundTruth, read_ground_truth
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
@@ -37,13 +39,25 @@ def labels_frame(labels: list[EpisodeLabels]) -> pd.DataFrame:
     return pd.concat(parts, ignore_index=True)
 
 
+def canonical_waypoints(gt: GroundTruth, symmetries: list[str]) -> np.ndarray:
+    """The annotation's way-points ``(H, 7)``, given in the target's frame at the way-point
+    frame, re-expressed in that target's canonical frame (as the labels are)."""
+    H = len(gt.tool)
+    k = np.clip(gt.waypoint_index, 0, H - 1)
+    target = gt.poses[k, gt.target]  # (H, 7) raw target frames
+    canonical = canonical_poses(gt.poses, symmetries)[k, gt.target]
+    return compose(relative(target, canonical), gt.waypoint)
+
+
 def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfig,
                   recordings_dir: Path | None = None) -> dict[str, float | int]:
     start = time.perf_counter()
     poses, status, meta = load_episodes(dataset_dir, task.name)
     if meta["objects"] != task.names:
         raise HspError(f"{dataset_dir}: dataset objects {meta['objects']} are not those of task {task.name!r} {task.names}")
-    labels = [label_episode(p, s, cfg) for p, s in track(list(zip(poses, status)), description=f"label {task.name}")]
+    symmetries = [o.symmetry for o in task.objects]
+    labels = [label_episode(p, s, cfg, symmetries=symmetries)
+              for p, s in track(list(zip(poses, status)), description=f"label {task.name}")]
     with atomic_path(Path(out_file)) as tmp:
         labels_frame(labels).to_parquet(tmp, index=False)
     report: dict[str, float | int] = {"episodes": len(labels), "frames": int(sum(len(p) for p in poses))}
@@ -51,13 +65,15 @@ def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfi
         recs = list_recordings(recordings_dir)
         if len(recs) != len(labels):
             raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(labels)} dataset episodes")
-        truth = []
-        for path, p in zip(recs, poses):
+        truth, pred = [], []
+        groups = identical_groups(task)
+        for path, p, lab in zip(recs, poses, labels):
             gt = read_ground_truth(path)
             if len(gt.tool) != len(p):
                 raise HspError(f"{path}: {len(gt.tool)} frames, the dataset episode has {len(p)}")
-            truth.append({"tool": gt.tool, "target": gt.target, "waypoint": gt.waypoint})
-        pred = [{"tool": lab.tool, "target": lab.target, "waypoint": lab.waypoint} for lab in labels]
+            truth.append({"tool": gt.tool, "target": gt.target, "waypoint": canonical_waypoints(gt, symmetries)})
+            true_index = np.argsort(match_identical(groups, p, gt.poses))  # the tracker's nut 1 may be the truth's nut 3
+            pred.append({"tool": true_index[lab.tool], "target": true_index[lab.target], "waypoint": lab.waypoint})
         report.update(label_metrics(pred, truth))
     report["seconds"] = time.perf_counter() - start
     log.info("labelled %d episodes from %s into %s in %.1f s", len(labels), dataset_dir, out_file, report["seconds"])

@@ -4,8 +4,13 @@ For each object and frame: predict with damped constant velocity, crop the scene
 near the prediction (table removed, colour-gated by the object's palette), express them
 in the predicted object frame and align them to the model's surface samples (exact
 normals) with a Tukey-robust point-to-plane ICP, gates 15 mm then 6 mm. A point near
-several objects goes to the one whose predicted surface is nearest. Each pose is
-marked ok / suspect / lost from the number of supporting points and the inlier RMSE.
+several objects goes to the one whose predicted surface is nearest. ICP is skipped when
+the prediction already fits as well as the object's last solution (most objects, most
+frames, are still), and its pose is kept only when it fits better than the prediction.
+A multicoloured object without symmetry is checked for half turns its shape cannot tell
+apart. Objects at rest are settled on their support and held while hidden
+(:mod:`hsp.perception.rest`). Each pose is marked ok / suspect / lost from the number of
+supporting points and the inlier RMSE.
 
 The tracker is given its start poses; :mod:`hsp.perception.initialize` estimates them
 from the first frame.
