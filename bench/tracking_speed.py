@@ -2,7 +2,7 @@
 
 For each task, the first ``--frames`` frames of two recordings are tracked (reading and
 decoding excluded): one at a time in one process, then both at once in two processes, as
-``hsp parse`` runs them (one Open3D thread each). Prints the median over ``--repeats`` of
+``hsp parse`` runs them (one process per core, pinned to it). Prints the median over ``--repeats`` of
 frames/s for one process and the combined rate of two. Issue 4's target: ≥ 30 frames/s
 with six objects (tire-removal) on this 2-core machine; the paper's GPU tracker: 90.
 Run: ``python bench/tracking_speed.py [--recordings data/recordings] [--frames 150] [--repeats 3]``.
@@ -20,6 +20,7 @@ import statistics  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from hsp.parallel import pin_to_one_core  # noqa: E402
 from hsp.perception.episode import object_models, track_recording  # noqa: E402
 from hsp.perception.tracker import TrackerConfig  # noqa: E402
 from hsp.recording.reader import read_recording  # noqa: E402
@@ -41,16 +42,19 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     print(f"{'task':14s} {'objects':>7s} {'1 process':>10s} {'2 processes':>12s}   (frames/s, median of {args.repeats})")
-    pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn"))
+    ctx = multiprocessing.get_context("spawn")
+    one_pool, pool = (ProcessPoolExecutor(k, mp_context=ctx, initializer=pin_to_one_core, initargs=(ctx.Value("i", 0),))
+                      for k in (1, 2))
     for name in list_tasks():
         paths = sorted((args.recordings / name).glob("*.mcap"))[:2]
         if len(paths) < 2:
             print(f"{name:14s} needs two recordings under {args.recordings / name}")
             continue
         jobs = [(name, p, args.frames) for p in paths]
-        one = [_rate(jobs[0]) for _ in range(args.repeats)]
+        one = [one_pool.submit(_rate, jobs[0]).result() for _ in range(args.repeats)]
         two = [sum(pool.map(_rate, jobs)) for _ in range(args.repeats)]
         print(f"{name:14s} {len(load_task(name).objects):7d} {statistics.median(one):10.1f} {statistics.median(two):12.1f}", flush=True)
+    one_pool.shutdown()
     pool.shutdown()
 
 
