@@ -8,8 +8,8 @@ of ICP's positions and headings since the object stopped) replaces them. An anch
 is released as soon as ICP finds it more than ``release_m`` away: it is being moved.
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
-under the socket): it is still where it came to rest, as long as something is seen in front
-of it and nothing is seen through it (:func:`seen_through`).
+under the socket): it is still where it came to rest, as long as the depth image does not
+see through where it would be (:func:`seen_through`).
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ class RestConfig:
     average_frames: int = 30
     """Anchors average the last this many measurements or so (a running mean, then an EMA)."""
     refine_m: float = 0.003
-    """Only measurements this close to the anchor's height refine it; horizontally, all
-    within ``release_m`` do (a start a few millimetres off is corrected)."""
+    """Only measurements this close to the anchor's height refine it; horizontally, all that
+    do not release it do."""
     max_tilt_deg: float = 30.0
     """An object tilted further from every resting axis when it stops is not resting on it
     (it leans on something); once anchored, ICP's tilt is noise."""

@@ -90,7 +90,6 @@ class SurfaceModel:
     """Surface samples with normals and the colour palette of one object."""
 
     def __init__(self, mesh: Mesh, n_points: int, seed: int = 0, symmetry: str = "none") -> None:
-        self.symmetry = symmetry
         points, normals, face = sample_surface(mesh, n_points, np.random.default_rng(seed))
         self.sample_rgb = mesh.face_rgb[face]
         """Albedo (n_points, 3) at each surface sample."""
