@@ -32,6 +32,8 @@ class TrackedEpisode:
     """(T, n) :class:`~hsp.dataset.features.TrackStatus` codes."""
     seconds: float
     """Time spent initialising and tracking (reading excluded)."""
+    first_frame_seconds: float
+    """Of which the first frame's scene estimate."""
 
 
 def object_models(task: Task, cfg: TrackerConfig, seed: int) -> list[SurfaceModel]:
@@ -61,6 +63,7 @@ def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg:
     camera = rec.T_world_cam[:3]
     pts, cols = scene_points(rec.rgb[0], rec.depth[0], rec.K, rec.T_world_cam, cfg)
     first, found = initialize(task, pts, cols, models, camera, cfg)
+    first_frame = time.perf_counter() - start
 
     def redetect(p: np.ndarray, c: np.ndarray, idx: list[int]) -> tuple[np.ndarray, np.ndarray]:
         poses, ok = initialize(task, p, c, models, camera, cfg, only=idx, first_frame=False)
@@ -68,4 +71,4 @@ def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg:
 
     poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, first, cfg, found, redetect, progress,
                           rest_state(task, models))
-    return TrackedEpisode(poses, status, time.perf_counter() - start)
+    return TrackedEpisode(poses, status, time.perf_counter() - start, first_frame)
