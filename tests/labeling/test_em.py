@@ -2,9 +2,11 @@
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from hsp.errors import HspError
 from hsp.labeling.em import em_label
+from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, PriorScores, pairs_of
 
 
@@ -58,3 +60,24 @@ def test_a_model_of_the_wrong_shape_is_a_clear_error():
     short = (ep[0][:10], ep[1][:10])
     with pytest.raises(HspError, match="scored 10 frames"):
         em_label([ep], PriorConfig(), lambda labels: lambda w, s: PriorScores(*short[:1], short[1] == 0, PriorConfig()), 1)
+
+
+def test_with_symmetries_the_model_sees_canonical_poses():
+    """Object 2 is round (z_continuous) and turned about its axis: the score model is given
+    its canonical orientation, and the labels are those of label_episode with symmetries."""
+    world, status = _episode()
+    world[:, 2, 3:] = Rotation.from_euler("z", 0.7).as_quat()
+    symmetries = ["none", "none", "z_continuous"]
+    seen = []
+
+    def fit(labels):
+        def model(w, s):
+            seen.append(w[:, 2, 3:].copy())
+            return PriorScores(w, s == 0, PriorConfig())
+        return model
+
+    result = em_label([(world, status)], PriorConfig(), fit, iterations=1, symmetries=symmetries)
+    assert np.allclose(np.abs(seen[0][:, 3]), 1.0), "the turn about z is removed"
+    direct = label_episode(world, status, PriorConfig(), symmetries=symmetries)
+    assert np.array_equal(result.labels[0].target, direct.target)
+    assert np.allclose(result.labels[0].waypoint, direct.waypoint)
