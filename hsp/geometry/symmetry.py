@@ -15,6 +15,12 @@ def z_rotations(k: int) -> np.ndarray:
     return Rotation.from_euler("z", (np.arange(k) * 2 * np.pi / k)[:, None]).as_matrix()
 
 
+def z_folds(symmetry: str) -> int:
+    """How many turns about the body z axis leave the object unchanged: 0 for a continuous
+    symmetry, 4 for a cube standing on a face, 1 for none (or a half turn about x)."""
+    return {"z_continuous": 0, "cube": 4, **Z_FOLDS}.get(symmetry, 1)
+
+
 def symmetry_rotations(symmetry: str, resting: bool = False) -> np.ndarray:
     """Rotations ``(K, 3, 3)`` that leave the object unchanged.
 

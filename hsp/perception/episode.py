@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hsp.errors import HspError
-from hsp.geometry.symmetry import Z_FOLDS
+from hsp.geometry.symmetry import z_folds
 from hsp.perception.initialize import initialize
 from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestState
 from hsp.perception.tracker import SurfaceModel, TrackerConfig, scene_points, track
@@ -47,8 +47,7 @@ def rest_state(task: Task, models: list[SurfaceModel]) -> RestState:
     the others as the layout stands them; never the end-effector or what starts in the air."""
     axes = [None if i == 0 or o.place.support == "air" else CUBE_AXES if o.symmetry == "cube" else UPRIGHT
             for i, o in enumerate(task.spec.objects)]
-    folds = {"cube": 4, "z_continuous": 0, **Z_FOLDS}
-    fold = [folds.get(o.symmetry, 1) for o in task.spec.objects]  # about the up axis
+    fold = [z_folds(o.symmetry) for o in task.spec.objects]  # about the up axis
     periods = [2 * np.pi / f if f else 0.0 for f in fold]
     return RestState(axes, [m.surface for m in models], periods)
 

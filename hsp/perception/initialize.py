@@ -17,7 +17,7 @@ import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
-from hsp.geometry.symmetry import Z_FOLDS
+from hsp.geometry.symmetry import z_folds
 from hsp.perception.pointcloud import SHADE_RANGE, colour_match, palette_mask
 from hsp.perception.tracker import SurfaceModel, TrackerConfig, _icp, colour_agreement
 from hsp.tasks.layout import mesh_extent
@@ -44,7 +44,7 @@ def _clusters(points: np.ndarray) -> list[np.ndarray]:
 
 def _yaw_grid(symmetry: str) -> np.ndarray:
     """Yaw hypotheses: ``YAW_STEPS`` per turn, over one period of the object's symmetry about z."""
-    period = {"z_continuous": 0.0, "cube": 4, **Z_FOLDS}.get(symmetry, 1)
+    period = z_folds(symmetry)
     if not period:
         return np.zeros(1)
     steps = max(1, -(-YAW_STEPS // period))

@@ -164,13 +164,12 @@ FLIPS = Rotation.from_rotvec(np.pi * np.eye(3)).as_matrix()
 """Half turns about the body x, y and z axes."""
 
 
-def unflip(model: SurfaceModel, local: np.ndarray, cols: np.ndarray, cfg: TrackerConfig) -> np.ndarray | None:
+def unflip(model: SurfaceModel, local: np.ndarray, cols: np.ndarray, cost: float, cfg: TrackerConfig) -> np.ndarray | None:
     """The half turn about the model's centroid, ``(4, 4)`` in the object frame, that
     explains the points' colours markedly better (``cfg.flip_margin`` of them) with a shape
-    fit no worse; None when the pose is right."""
+    fit (``cost``: the points' :func:`_fit_cost` as they are) no worse; None when the pose is right."""
     c = model.centroid
     best, best_R = colour_agreement(model, local, cols, cfg) + cfg.flip_margin * len(local), None
-    cost = _fit_cost(model, local, cfg)
     for R in FLIPS:
         turned = (local - c) @ R + c  # the points as the half-turned model sees them
         agree = colour_agreement(model, turned, cols, cfg)
@@ -207,11 +206,6 @@ def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel],
         best[cand[closer]] = d[closer]
         owner[cand[closer]] = i
     return owner
-
-
-def owner_count(owner: np.ndarray, n: int) -> np.ndarray:
-    """Scene points given to each of ``n`` objects ``(n,)``."""
-    return np.bincount(owner[owner >= 0], minlength=n)
 
 
 def predict(prev: np.ndarray, dx: np.ndarray, drot: np.ndarray, alpha: float) -> np.ndarray:
@@ -259,6 +253,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
         rest.start(start, known)
     for t in range(T_frames):
         turned = np.zeros(n, bool)
+        measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
         pts, cols = scene_points(rgb[t], depth[t], K, T_world_cam, cfg)
         pred = predict(prev, dx, drot, cfg.damping)
         owner = assign_points(pts, cols, models, pred, cfg, known)
@@ -272,6 +267,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                         T_world_cam) <= rest.cfg.max_seen_through:
                     status[t, i] = TrackStatus.SUSPECT  # hidden where it rests: held there
                 continue
+            measured[i] = True
             pose = pred[i]
             local = (pts[sel] - pose[:3]) @ pose_to_matrix(pose)[:3, :3]
             cost, inliers, rmse = _fit(models[i], local, cfg)
@@ -284,7 +280,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                     local, cost = moved, cost_icp
                 # else no better than the prediction: a half-hidden canvas would slide along itself
                 fitted[i] = cost
-            flip = unflip(models[i], local, cols[sel], cfg) if models[i].can_flip else None
+            flip = unflip(models[i], local, cols[sel], cost, cfg) if models[i].can_flip else None
             if flip is not None:
                 pose, turned[i] = compose(pose, pose_from_matrix(flip)), True
             poses[t, i] = pose
@@ -294,8 +290,7 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                 status[t, i] = TrackStatus.SUSPECT
         poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
         if rest is not None:
-            measured = known & (status[t] != TrackStatus.LOST) & (owner_count(owner, n) >= cfg.min_points)
-            poses[t] = rest.apply(poses[t], measured)
+            poses[t] = rest.apply(poses[t], measured & (status[t] != TrackStatus.LOST))
         k = lost_for // cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
         search = np.flatnonzero((lost_for % cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
         if redetect is not None and search.size:
