@@ -123,6 +123,9 @@ class RestState:
         self.still_at = np.zeros((n, 3))
         self._count = np.zeros(n, int)  # measurements in the position average
         self._turns = np.zeros(n, int)  # and in the heading average, restarted after a hidden spell
+        self.fresh = np.zeros(n, bool)
+        """Anchors whose heading has just started (anchored, turned, seen again after a
+        hidden spell) and that have not been :meth:`settle`-d on a better estimate since."""
 
     def start(self, poses: np.ndarray, found: np.ndarray) -> None:
         """Anchor the objects found at the start that can rest (the layout rests them)."""
@@ -133,8 +136,15 @@ class RestState:
                 self._anchor(i, poses[i, :3], upright(poses[i, 3:], axes)[0])
 
     def _anchor(self, i: int, x: np.ndarray, q_up: np.ndarray) -> None:
-        self.anchored[i], self._count[i], self._turns[i] = True, 1, 1
+        self.anchored[i], self._count[i], self._turns[i], self.fresh[i] = True, 1, 1, True
         self.anchor[i] = np.concatenate([x, q_up])
+
+    def settle(self, i: int, pose: np.ndarray) -> np.ndarray:
+        """Replace anchor ``i``'s horizontal position and heading with a better estimate
+        than ICP's (:mod:`hsp.perception.edges`), weighted as a full average; the settled pose."""
+        self.anchor[i, :2], self.anchor[i, 3:] = pose[:2], pose[3:]
+        self._count[i], self._turns[i], self.fresh[i] = self.cfg.average_frames, self.cfg.average_frames, False
+        return self._settled(i)
 
     def _settled(self, i: int) -> np.ndarray:
         """The anchored pose, on the table when its lowest point is near it."""
@@ -156,8 +166,9 @@ class RestState:
             step[2] = 0.0  # pulled up by a block put on top of it
         a[:3] += step
         if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):  # turned (a nut by the wrench): a new heading
-            a[3:], self._turns[i] = q_up, 1
+            a[3:], self._turns[i], self.fresh[i] = q_up, 1, True
             return True
+        self.fresh[i] |= self._turns[i] == 0  # seen again after a hidden spell
         self._turns[i] = min(self._turns[i] + 1, self.cfg.average_frames)
         a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._turns[i]]) * Rotation.from_quat(a[3:])).as_quat()
         return True
@@ -172,7 +183,7 @@ class RestState:
                 continue
             q_up, tilt = upright(poses[i, 3:], axes)
             if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up):
-                self.anchored[i], self.still[i], self.still_at[i] = False, 0, poses[i, :3]
+                self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
                 if not measured[i]:  # hidden (a nut under the socket may be turned): heading unknown

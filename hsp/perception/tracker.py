@@ -9,8 +9,10 @@ the prediction already fits as well as the object's last solution (most objects,
 frames, are still), and its pose is kept only when it fits better than the prediction.
 A multicoloured object without symmetry is checked for half turns its shape cannot tell
 apart. Objects at rest are settled on their support and held while hidden
-(:mod:`hsp.perception.rest`). Each pose is marked ok / suspect / lost from the number of
-supporting points and the inlier RMSE.
+(:mod:`hsp.perception.rest`); when one comes to rest, its heading and position are taken
+from the image edges of its creases (:mod:`hsp.perception.edges`), which depth hardly
+fixes. Each pose is marked ok / suspect / lost from the number of supporting points and
+the inlier RMSE.
 
 The tracker is given its start poses; :mod:`hsp.perception.initialize` estimates them
 from the first frame.
@@ -29,6 +31,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
+from hsp.perception.edges import EdgeConfig, crease_edges, image_gradient, refine_on_edges
 from hsp.perception.pointcloud import backproject, colour_match, palette_mask
 from hsp.perception.rest import RestState, seen_through
 from hsp.sim.render import Mesh
@@ -64,6 +67,11 @@ class TrackerConfig:
     flip_margin: float = 0.15
     """Share of an object's points whose colour a half-turned pose must explain better to
     replace ICP's (see :func:`unflip`)."""
+    edges: EdgeConfig = EdgeConfig()
+    """Search of a resting object's heading and position on the image edges."""
+    edge_tolerance: float = 0.1
+    """The edges' pose is kept only if it fits the depth points within this fraction of
+    the fit cost where it started (a hand's edges next to a block must not pull it)."""
 
 
 def _face_cross(tri: np.ndarray) -> np.ndarray:
@@ -108,6 +116,7 @@ class SurfaceModel:
         self.centroid = points.mean(axis=0)
         self.can_flip = symmetry == "none" and len(self.palette) > 1
         """Turned end for end, its shape could fit as well; only its colours tell."""
+        self.creases = crease_edges(mesh)
 
     def colour_mask(self, rgb: np.ndarray, tol: float) -> np.ndarray:
         return palette_mask(rgb, self.palette, tol)
@@ -180,6 +189,20 @@ def unflip(model: SurfaceModel, local: np.ndarray, cols: np.ndarray, cost: float
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = best_R, c - best_R @ c
     return T
+
+
+def settle_on_edges(model: SurfaceModel, pose: np.ndarray, points: np.ndarray, gradient: np.ndarray, period: float,
+                    K: np.ndarray, T_world_cam: np.ndarray, cfg: TrackerConfig) -> tuple[np.ndarray, float] | None:
+    """A resting object's ``pose (7,)`` turned and shifted onto the image edges of its creases
+    (:func:`~hsp.perception.edges.refine_on_edges`) and the fit cost of its depth ``points
+    (N, 3)`` there; None when they fit that pose worse than ``cfg.edge_tolerance`` allows."""
+    edged = refine_on_edges(gradient, model.creases, pose, period, K, T_world_cam, cfg.edges)
+
+    def cost(p: np.ndarray) -> float:
+        return _fit_cost(model, (points - p[:3]) @ pose_to_matrix(p)[:3, :3], cfg)
+
+    c = cost(edged)
+    return (edged, c) if c <= (1 + cfg.edge_tolerance) * cost(pose) else None
 
 
 def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel], pred: np.ndarray,
@@ -290,7 +313,16 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                 status[t, i] = TrackStatus.SUSPECT
         poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
         if rest is not None:
-            poses[t] = rest.apply(poses[t], measured & (status[t] != TrackStatus.LOST))
+            seen = measured & (status[t] != TrackStatus.LOST)
+            poses[t] = rest.apply(poses[t], seen)
+            look = np.flatnonzero(rest.fresh & rest.anchored & seen & (np.asarray(rest.periods) > 0))  # a heading to find
+            gradient = image_gradient(rgb[t]) if look.size else None
+            for i in look:
+                edged = settle_on_edges(models[i], poses[t, i], pts[owner == i], gradient, rest.periods[i], K,
+                                        T_world_cam, cfg)
+                if edged is not None:
+                    poses[t, i], fitted[i] = rest.settle(i, edged[0]), edged[1]  # the solution to keep
+                rest.fresh[i] = False
         k = lost_for // cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
         search = np.flatnonzero((lost_for % cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
         if redetect is not None and search.size:

@@ -52,6 +52,26 @@ def test_a_still_object_is_anchored_settled_on_the_table_and_released_when_moved
     assert not rest.anchored[1] and np.allclose(moved[1], lifted), "3 cm up: it is being moved"
 
 
+def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
+    cfg = RestConfig(rest_frames=3)
+    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg)
+    hand, nut = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.1])
+    rest.start(np.stack([hand, nut]), np.array([True, True]))
+    assert rest.fresh.tolist() == [False, True], "anchored at the start: its heading is ICP's"
+    better = _pose([0.501, 0.1, 0.02], [0, 0, 0.15])
+    settled = rest.settle(1, better)
+    assert not rest.fresh[1] and np.allclose(settled[:2], better[:2]) and np.allclose(settled[3:], better[3:])
+    for _ in range(3):  # ICP's own heading, 3 degrees off, barely moves the settled one
+        out = rest.apply(np.stack([hand, nut]), np.array([True, True]))
+    assert abs(np.degrees((Rotation.from_quat(out[1, 3:]) * Rotation.from_quat(better[3:]).inv()).magnitude())) < 0.5
+    rest.apply(np.stack([hand, nut]), np.array([True, False]))  # hidden under the socket, maybe turned
+    assert not rest.fresh[1]
+    rest.apply(np.stack([hand, nut]), np.array([True, True]))
+    assert rest.fresh[1], "seen again after a hidden spell: its heading is to be found again"
+    rest.apply(np.stack([hand, _pose([0.5, 0.1, 0.06], [0, 0, 0])]), np.array([True, True]))
+    assert not rest.anchored[1] and not rest.fresh[1], "released: nothing to settle"
+
+
 def test_a_hidden_object_is_told_from_a_gone_one():
     """A camera 1 m above looking down at a cube on the table: a reading nearer than the
     cube hides it; one behind it means the camera sees where the cube would be."""
