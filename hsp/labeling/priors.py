@@ -15,7 +15,11 @@ indices k ≥ t; ``rel[t, p]`` is p_t[i, j], the tool's pose in the target's fra
   :mod:`viterbi`), or jump to a later index k ≥ t with weight (1−β)/(H−t)·exp(−α‖ŵ_k‖),
   ‖ŵ_k‖ being the tool's distance to the target at frame k. The weights are left
   unnormalised over k, exactly as written, so nearness to the target (α = 100 per metre)
-  is what makes a frame a way-point, not the number of candidate frames.
+  is what makes a frame a way-point, not the number of candidate frames. A way-point is
+  where a motion toward it ends, so only frames where the tool is still relative to the
+  target (it moves less than ``moving_m`` per frame there), or the last frame, can be
+  one: otherwise every frame of a descent onto a block would be a candidate, each nearer
+  the block beside it than the one below.
 * π_l (:meth:`PriorScores.motion`): the observed step of the tool in the target frame,
   Δ = p_{t+1}[i, j] − p_t[i, j] (translation), is scored as Gaussian (σ = ``motion_sigma_m``)
   around a straight-line step of the same length toward the way-point, not overshooting it.
@@ -108,7 +112,17 @@ class PriorScores:
         self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2))  # (P, H, 3)
         self._sq = np.sum(self._xyz**2, axis=-1)  # (P, H)
         dist = np.sqrt(self._sq)
-        self._near = np.where(self.ok.T, -cfg.alpha * dist, NEG)
+        self._near = np.where(self.ok.T & self._still(), -cfg.alpha * dist, NEG)
+
+    def _still(self, half_window: int = 2) -> np.ndarray:
+        """Frames where the tool is still relative to the target ``(P, H)``: its mean step
+        over ``half_window`` frames either side is under ``moving_m``; the last frame too."""
+        a = np.clip(np.arange(self.H) - half_window, 0, self.H - 1)
+        b = np.clip(np.arange(self.H) + half_window, 0, self.H - 1)
+        step = np.linalg.norm(self._xyz[:, b] - self._xyz[:, a], axis=-1) / np.maximum(b - a, 1)
+        still = step < self.cfg.moving_m
+        still[:, -1] = True
+        return still
 
     def unary(self, t: int) -> np.ndarray:
         return self._unary[t]

@@ -11,14 +11,17 @@ from hsp.labeling.priors import PriorConfig, PriorScores, pairs_of
 
 
 def _episode(H=40):
-    """End-effector (0) carries nothing and visits object 1, then object 2."""
+    """End-effector (0) carries nothing and visits object 1, then object 2, pausing at each
+    for the last quarter of its half (a way-point is where a motion ends)."""
     world = np.zeros((H, 3, 7))
     world[..., 6] = 1.0
     world[:, 1, :3] = [0.5, 0.1, 0.0]
     world[:, 2, :3] = [0.5, -0.1, 0.0]
     half = H // 2
-    world[:half, 0, :3] = np.linspace([0.5, 0.0, 0.3], [0.5, 0.1, 0.02], half)
-    world[half:, 0, :3] = np.linspace([0.5, 0.1, 0.3], [0.5, -0.1, 0.02], H - half)
+    for start, (a, b) in zip((0, half), (([0.5, 0.0, 0.3], [0.5, 0.1, 0.02]), ([0.5, 0.1, 0.3], [0.5, -0.1, 0.02]))):
+        n = (H - half if start else half) * 3 // 4
+        world[start:start + n, 0, :3] = np.linspace(a, b, n)
+        world[start + n:(H if start else half), 0, :3] = b
     return world, np.zeros((H, 3), np.int64)
 
 

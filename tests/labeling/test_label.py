@@ -76,6 +76,27 @@ def test_boundary_errors():
     np.testing.assert_array_equal(boundary_errors(np.array([]), np.array([3]), 20), [20])
 
 
+def test_a_way_point_is_where_the_tool_stops_not_where_it_passes_nearest():
+    """The end-effector sweeps 2 mm past object 1 without slowing, stops 3 cm from object 2
+    for 10 frames, then leaves: only the stop (and the last frame) can be a way-point."""
+    from hsp.labeling.priors import PriorScores
+
+    H = 50
+    world = np.zeros((H, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 1, :3] = [0.5, 0.0, 0.0]
+    world[:, 2, :3] = [0.5, 0.2, 0.0]
+    world[:30, 0, :3] = np.linspace([0.5, -0.2, 0.002], [0.5, 0.2, 0.03], 30)
+    world[30:40, 0, :3] = [0.5, 0.2, 0.03]
+    world[40:, 0, :3] = np.linspace([0.5, 0.2, 0.03], [0.5, 0.2, 0.3], 10)
+    scores = PriorScores(world, np.ones((H, 3), bool), PriorConfig())
+    hand_is_tool = scores.pairs[:, 0] == 0
+    candidates = np.flatnonzero(np.isfinite(scores.jump(0)[hand_is_tool]).any(axis=0))
+    assert set(candidates) == set(range(31, 39)) | {H - 1}, candidates
+    lab = label_episode(world, np.zeros((H, 3), np.int64), PriorConfig())
+    assert np.all(lab.target[:30] == 2) and np.allclose(lab.waypoint[:30, :3], [0.0, 0.0, 0.03], atol=1e-9)
+
+
 def test_lost_frames_are_never_way_points_of_the_lost_object():
     """Documented behaviour: a lost object's frames carry no evidence (no motion term) and
     cannot be way-points of pairs involving it; labelling still covers every frame."""
@@ -87,7 +108,9 @@ def test_lost_frames_are_never_way_points_of_the_lost_object():
     scores = PriorScores(world, status != TrackStatus.LOST, PriorConfig())
     involves_2 = (scores.pairs == 2).any(axis=1)
     J = scores.jump(10)  # way-points k = 10 … 59
-    assert np.all(np.isneginf(J[involves_2][:, 30:36])) and np.all(np.isfinite(J[~involves_2]))
+    unaffected = PriorScores(world, np.ones(status.shape, bool), PriorConfig()).jump(10)
+    assert np.all(np.isneginf(J[involves_2][:, 30:36])) and np.array_equal(J[~involves_2], unaffected[~involves_2])
+    assert np.isfinite(unaffected[involves_2][:, 30:36]).any(), "seen, the pause at object 2 is a way-point"
     assert np.all(scores.motion(42)[involves_2] == 0.0)
     lab = label_episode(world, status, PriorConfig())
     assert len(lab.tool) == 60 and np.all(lab.target != 0)
