@@ -25,8 +25,6 @@ from hsp.sim.render import Mesh
 
 @dataclass(frozen=True)
 class EdgeConfig:
-    crease_deg: float = 20.0
-    """Faces meeting at a sharper angle than this make a crease."""
     samples: int = 8
     """Points sampled along each crease."""
     max_turn_deg: float = 30.0
@@ -52,7 +50,8 @@ class Creases:
 
 
 def crease_edges(mesh: Mesh, min_deg: float = 20.0) -> Creases:
-    """Edges shared by two faces whose normals differ by more than ``min_deg``; vertices
+    """Edges shared by two faces whose normals differ by more than ``min_deg`` (a hex nut's
+    18 and its paint mark's 12; not the diagonals of flat quads); vertices
     duplicated per face (an OBJ with face colours) are merged by position."""
     key = np.round(mesh.vertices / 1e-6).astype(np.int64)
     _, vid = np.unique(key, axis=0, return_inverse=True)
