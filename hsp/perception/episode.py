@@ -44,12 +44,14 @@ def object_models(task: Task, cfg: TrackerConfig, seed: int) -> list[SurfaceMode
 
 def rest_state(task: Task, models: list[SurfaceModel]) -> RestState:
     """Which objects can rest and on which body axes: every face of a cube, the z axis of
-    the others as the layout stands them; never the end-effector or what starts in the air."""
+    the others as the layout stands them; never the end-effector or what starts in the air.
+    Objects the task mounts on a revolute joint (lug nuts) never tilt."""
     axes = [None if i == 0 or o.place.support == "air" else CUBE_AXES if o.symmetry == "cube" else UPRIGHT
             for i, o in enumerate(task.spec.objects)]
     fold = [z_folds(o.symmetry) for o in task.spec.objects]  # about the up axis
     periods = [2 * np.pi / f if f else 0.0 for f in fold]
-    return RestState(axes, [m.surface for m in models], periods)
+    mounted = [o.place.joint == "revolute_z" for o in task.spec.objects]
+    return RestState(axes, [m.surface for m in models], periods, mounted=mounted)
 
 
 def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg: TrackerConfig = TrackerConfig(),

@@ -114,9 +114,13 @@ class RestState:
     periods: list[float]
     """Symmetry period (rad) of each object's heading about its up axis; 0 for none at all."""
     cfg: RestConfig = field(default_factory=RestConfig)
+    mounted: list[bool] = field(default_factory=list)
+    """Objects on a revolute joint about their own z (a lug nut on its stud): they turn, but
+    never tilt, so they stay upright even while ICP moves them; none when empty."""
 
     def __post_init__(self) -> None:
         n = len(self.axes)
+        self.mounted = list(self.mounted) or [False] * n
         self.still = np.zeros(n, int)
         self.anchored = np.zeros(n, bool)
         self.anchor = np.zeros((n, 7))
@@ -182,6 +186,8 @@ class RestState:
             if axes is None:
                 continue
             q_up, tilt = upright(poses[i, 3:], axes)
+            if self.mounted[i]:
+                out[i, 3:] = q_up  # released or not, a mounted object only turns about its axis
             if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up):
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue

@@ -72,6 +72,19 @@ def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
     assert not rest.anchored[1] and not rest.fresh[1], "released: nothing to settle"
 
 
+def test_a_mounted_object_turns_but_never_tilts_even_when_released():
+    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3), mounted=[False, True])
+    hand, nut = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.2])
+    rest.start(np.stack([hand, nut]), np.array([True, True]))
+    pulled = _pose([0.5, 0.1, 0.04], [np.radians(60), 0, 0.3])  # ICP drags it 2 cm up, tipped over
+    out = rest.apply(np.stack([hand, pulled]), np.array([True, True]))
+    assert not rest.anchored[1], "2 cm away: released"
+    assert np.allclose(out[1, :3], pulled[:3]) and np.isclose(Rotation.from_quat(out[1, 3:]).apply([0, 0, 1])[2], 1.0)
+    free = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3))
+    free.start(np.stack([hand, nut]), np.array([True, True]))
+    assert np.allclose(free.apply(np.stack([hand, pulled]), np.array([True, True]))[1], pulled), "unmounted: as measured"
+
+
 def test_a_hidden_object_is_told_from_a_gone_one():
     """A camera 1 m above looking down at a cube on the table: a reading nearer than the
     cube hides it; one behind it means the camera sees where the cube would be."""
