@@ -133,5 +133,8 @@ def refine_on_edges(gradient: np.ndarray, creases: Creases, pose: np.ndarray, pe
         g = _grid(shift_half, shift_step)
         offsets = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
         candidates = np.concatenate([_shifted(T, offsets) for T in _turned(M, _grid(turn_half, turn_step))])
-        M = candidates[np.argmax(edge_scores(gradient, creases, candidates, K, T_world_cam, cfg.samples))]
+        scores = edge_scores(gradient, creases, candidates, K, T_world_cam, cfg.samples)
+        here = len(candidates) // 2  # both grids are odd and centred: the pose as it is
+        best = int(np.argmax(scores))
+        M = candidates[best if scores[best] > scores[here] else here]  # no edge evidence: stay
     return pose_from_matrix(M)

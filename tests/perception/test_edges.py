@@ -57,3 +57,11 @@ def test_a_nut_is_turned_and_moved_back_onto_its_edges(nut_image, turn_deg, shif
     assert abs(_heading_deg(found[3:], pose[3:], 60.0)) < 3.0
     assert np.linalg.norm(found[:2] - pose[:2]) < 0.001
     assert found[2] == start[2]  # only the heading and the horizontal position are searched
+
+
+def test_without_edge_evidence_the_pose_stays_where_it_is(nut_image):
+    """A blank image (or a mesh without creases) scores every candidate 0: no grid corner
+    may win by being first."""
+    gradient, creases, pose, K, T_world_cam = nut_image
+    blank = np.zeros_like(gradient)
+    assert np.allclose(refine_on_edges(blank, creases, pose, np.radians(60.0), K, T_world_cam), pose)
