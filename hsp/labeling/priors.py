@@ -6,10 +6,12 @@ indices k ≥ t; ``rel[t, p]`` is p_t[i, j], the tool's pose in the target's fra
 * π_h (:meth:`PriorScores.unary`): the tool is the object moving most relative to the
   other objects (end-effector excluded from the comparison); when none moves more than
   ``moving_m`` per frame but the end-effector does, the end-effector is the tool. When
-  nothing moves at all there is no evidence (a held object pausing with the hand looks
-  exactly like a released one), and γ keeps the pair. The evidence is soft: the evidenced
-  tool gets 1 − ε, every other object ε/(n−1). Translation only: a lug nut turning in
-  place is not a tool.
+  nothing moves (a held object pausing with the hand looks exactly like a released one),
+  the tool is the last one that moved: a pause ends the motion before it, and the next
+  sub-task starts when something moves again, as the demonstrator's annotation has it.
+  Before anything moves there is no evidence. The evidence is soft: the evidenced tool
+  gets 1 − ε, every other object ε/(n−1). Translation only: a lug nut turning in place is
+  not a tool.
 * π_m (:meth:`PriorScores.jump`): the paper's formula is ambiguous about normalisation.
   Read as: keep the previous way-point index with probability β (a transition, see
   :mod:`viterbi`), or jump to a later index k ≥ t with weight (1−β)/(H−t)·exp(−α‖ŵ_k‖),
@@ -47,7 +49,7 @@ class PriorConfig:
     """α (1/m): preference for way-points where the tool is near the target."""
     beta: float = 0.95
     """β: probability of keeping the way-point index."""
-    tool_epsilon: float = 0.05
+    tool_epsilon: float = 0.01
     """ε: probability mass left for tools other than the motion evidence."""
     moving_m: float = 0.002
     """Per-frame relative translation (m) above which an object counts as moving."""
@@ -70,9 +72,10 @@ def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_windo
     """Per frame: the object moving most relative to the other non-end-effector objects
     (mean per-frame change of their separation, world translation, so a rotating object
     does not make the others look as if they moved); 0 (end-effector) when no such object
-    moves more than ``moving_m`` but the end-effector does; −1 when everything is still
-    (no evidence: a held object pausing with the hand); ``(H,)``. Each change is averaged
-    over ``half_window`` frames either side: tracking jitter cancels, motion does not."""
+    moves more than ``moving_m`` but the end-effector does; when everything is still, the
+    last tool that moved (a pause belongs to the motion it ends), or −1 (no evidence)
+    before anything has moved; ``(H,)``. Each change is averaged over ``half_window``
+    frames either side: tracking jitter cancels, motion does not."""
     H, n = world.shape[:2]
     x = world[:, :, :3]
     sep = x[:, :, None, :] - x[:, None, :, :]  # (H, n, n, 3)
@@ -89,7 +92,9 @@ def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_windo
     ee_motion = np.where(ee_ok, change[:, 0, :], 0.0).sum(axis=1) / np.maximum(ee_ok.sum(axis=1), 1)
     motion[:, 0] = 0.0
     tool = np.where(motion.max(axis=1) > moving_m, motion.argmax(axis=1), np.where(ee_motion > moving_m, 0, -1))
-    return np.append(tool, tool[-1]) if len(tool) else np.zeros(H, int)
+    tool = np.append(tool, tool[-1]) if len(tool) else np.zeros(H, int)
+    last_moved = np.maximum.accumulate(np.where(tool >= 0, np.arange(H), -1))
+    return np.where(last_moved >= 0, tool[np.maximum(last_moved, 0)], -1)
 
 
 class PriorScores:
@@ -108,7 +113,7 @@ class PriorScores:
         hit = np.log1p(-cfg.tool_epsilon)
         miss = np.log(cfg.tool_epsilon / max(n - 1, 1))
         self._unary = np.where(evidence[:, None] == i[None, :], hit, miss)  # (H, P)
-        self._unary[evidence < 0] = np.log(1.0 / n)  # everything still: no evidence
+        self._unary[evidence < 0] = np.log(1.0 / n)  # nothing has moved yet: no evidence
         self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2))  # (P, H, 3)
         self._sq = np.sum(self._xyz**2, axis=-1)  # (P, H)
         dist = np.sqrt(self._sq)

@@ -40,6 +40,22 @@ def test_tool_evidence_three_cases():
     assert np.all(tool_evidence(still, np.ones((H, n), bool), 0.002) == -1)
 
 
+def test_a_pause_belongs_to_the_motion_it_ends():
+    """Still at first (no evidence), the block carried, a pause (still the block: the hand has
+    not let go of the sub-task yet), then the hand alone leaves."""
+    H, n = 40, 3
+    world = np.tile([0.5, 0.0, 0.02, 0, 0, 0, 1.0], (H, n, 1))
+    world[:, 2, 0] += 0.3
+    step = np.zeros(H)
+    step[5:15] = 0.01  # frames 5–14: hand and block carried 1 cm a frame
+    world[:, :2, 1] += np.cumsum(step)[:, None]
+    world[25:, 0, 2] += 0.01 * np.arange(1, H - 24)  # from frame 25 the hand rises alone
+    ev = tool_evidence(world, np.ones((H, n), bool), moving_m=0.002, half_window=0)
+    assert np.all(ev[:4] == -1)
+    assert np.all(ev[5:24] == 1), ev  # carried, then paused
+    assert np.all(ev[25:] == 0)
+
+
 def test_tracking_jitter_is_not_tool_evidence_but_steady_motion_is():
     """A block jittering ±1.5 mm frame to frame (3 mm steps) is no tool; one carried 3 mm a frame is."""
     H, n = 30, 3
