@@ -12,7 +12,9 @@ apart. Objects at rest are settled on their support and held while hidden
 (:mod:`hsp.perception.rest`); when one comes to rest, its heading and position are taken
 from the image edges of its creases (:mod:`hsp.perception.edges`), which depth hardly
 fixes. Each pose is marked ok / suspect / lost from the number of supporting points and
-the inlier RMSE.
+the inlier RMSE, and a moving object's pose is suspect when the depth image sees past
+it; one the end-effector carries is then registered again from its grip (ICP slides a
+long round handle along itself).
 
 The tracker is given its start poses; :mod:`hsp.perception.initialize` estimates them
 from the first frame.
@@ -30,7 +32,7 @@ from hsp.dataset.features import TrackStatus
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
+from hsp.geometry import compose, pose_from_matrix, pose_to_matrix, relative
 from hsp.perception.edges import EdgeConfig, crease_edges, image_gradient, refine_on_edges
 from hsp.perception.pointcloud import backproject, colour_match, palette_mask
 from hsp.perception.rest import RestState, seen_through
@@ -72,6 +74,14 @@ class TrackerConfig:
     edge_tolerance: float = 0.1
     """The edges' pose is kept only if it fits the depth points within this fraction of
     the fit cost where it started (a hand's edges next to a block must not pull it)."""
+    max_seen_through: float = 0.15
+    """A moving object whose camera-facing surface the depth image sees past on more than
+    this share is not where its pose says: ICP slid it along itself (a brush dipped along
+    its handle leaves half its old place filled). If the end-effector carries it, it is
+    tried again from its grip; it is marked suspect if that does not fit either."""
+    carry_step_m: float = 0.003
+    """An object that moves this far in a frame while keeping its pose relative to the
+    end-effector (to a third of that) is carried by it, until it comes to rest."""
 
 
 def _face_cross(tri: np.ndarray) -> np.ndarray:
@@ -205,6 +215,75 @@ def settle_on_edges(model: SurfaceModel, pose: np.ndarray, points: np.ndarray, g
     return (edged, c) if c <= (1 + cfg.edge_tolerance) * cost(pose) else None
 
 
+def _register(model: SurfaceModel, points: np.ndarray, cols: np.ndarray, pred: np.ndarray, fitted: float,
+              cfg: TrackerConfig) -> tuple[np.ndarray, float, int, float, bool]:
+    """Pose of one object from the scene points it owns, starting at ``pred``: ICP unless
+    the prediction fits as well as the last solution (cost ``fitted``), kept only if it fits
+    better than the prediction; then the half-turn check. Returns the pose, the fit cost of
+    the last ICP solution (``fitted`` when ICP was skipped), inliers, inlier RMSE and
+    whether a half turn was undone."""
+    pose = pred
+    local = (points - pose[:3]) @ pose_to_matrix(pose)[:3, :3]
+    cost, inliers, rmse = _fit(model, local, cfg)
+    if cost > cfg.skip_ratio * fitted:  # else the prediction fits as well as the last solution
+        corr, rmse, inliers = _icp(model, local, cfg)  # no culling here: it lost objects mid-turn
+        moved = local @ corr[:3, :3].T + corr[:3, 3]
+        cost_icp = _fit_cost(model, moved, cfg)
+        if cost_icp < (1 - cfg.min_gain) * cost:
+            pose = compose(pose, pose_from_matrix(np.linalg.inv(corr)))
+            local, cost = moved, cost_icp
+        # else no better than the prediction: a half-hidden canvas would slide along itself
+        fitted = cost
+    flip = unflip(model, local, cols, cost, cfg) if model.can_flip else None
+    if flip is not None:
+        pose = compose(pose, pose_from_matrix(flip))
+    return pose, fitted, inliers, rmse, flip is not None
+
+
+def _grips(poses: np.ndarray, ok: np.ndarray, prev: np.ndarray, in_hand: np.ndarray, grip: np.ndarray,
+           cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """What the end-effector (object 0) carries, as grips (poses in its frame, ``(n, 7)``,
+    NaN for none) updated with one frame's ``poses (n, 7)`` (``ok (n,)``; ``prev``: last
+    frame's poses, ``in_hand``: last frame's poses in the end-effector's frame). An object
+    that moved more than ``carry_step_m`` while its pose in the end-effector's frame changed
+    by under a third of that moves with it: carried, until it comes to rest (the caller
+    drops its grip). A carried object's grip is kept while ICP slides it out of it."""
+    rel = np.full_like(in_hand, np.nan)
+    if ok[0]:
+        rel[ok] = relative(poses[ok], np.repeat(poses[:1], int(ok.sum()), axis=0))
+    rel[0] = np.nan
+    step = np.linalg.norm(poses[:, :3] - prev[:, :3], axis=1)
+    with np.errstate(invalid="ignore"):
+        together = (step > cfg.carry_step_m) & (np.linalg.norm(rel[:, :3] - in_hand[:, :3], axis=1) < step / 3)
+    grip = grip.copy()
+    grip[together] = rel[together]
+    return grip, rel
+
+
+def _retry(i: int, pred: np.ndarray, pts: np.ndarray, cols: np.ndarray, depth: np.ndarray, K: np.ndarray,
+           T_world_cam: np.ndarray, models: list[SurfaceModel], known: np.ndarray,
+           cfg: TrackerConfig) -> tuple[np.ndarray, float] | None:
+    """Object ``i`` registered again from ``pred[i]`` (the others' predictions decide which
+    points are its): the pose and fit cost if it fits (status ok) without the depth image
+    seeing through it, else None."""
+    sel = np.flatnonzero(assign_points(pts, cols, models, pred, cfg, known) == i)
+    sel = sel[:: -(-sel.size // cfg.max_points)] if sel.size > cfg.max_points else sel
+    if sel.size < cfg.min_points:
+        return None
+    pose, cost, inliers, rmse, _ = _register(models[i], pts[sel], cols[sel], pred[i], 0.0, cfg)  # ICP always
+    if _status(inliers, rmse, cfg) != TrackStatus.OK or seen_through(
+            models[i].surface, models[i].normals, pose_to_matrix(pose), depth, K, T_world_cam) > cfg.max_seen_through:
+        return None
+    return pose, cost
+
+
+def _status(inliers: int, rmse: float, cfg: TrackerConfig) -> TrackStatus:
+    """Lost with too few supporting points, suspect with a loose fit, else ok."""
+    if inliers < cfg.min_points:
+        return TrackStatus.LOST
+    return TrackStatus.SUSPECT if rmse > cfg.suspect_rmse_m else TrackStatus.OK
+
+
 def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel], pred: np.ndarray,
                   cfg: TrackerConfig, active: np.ndarray | None = None) -> np.ndarray:
     """Owner of each scene point ``(N,)``: the object whose predicted surface is nearest,
@@ -272,6 +351,8 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
     lost_for = np.where(known, 0, 1)
     dx, drot = np.zeros((n, 3)), np.zeros((n, 3))
     fitted = np.zeros(n)  # fit cost at each object's last ICP solution
+    grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
+    in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
     if rest is not None:
         rest.start(start, known)
     for t in range(T_frames):
@@ -291,26 +372,21 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
                     status[t, i] = TrackStatus.SUSPECT  # hidden where it rests: held there
                 continue
             measured[i] = True
-            pose = pred[i]
-            local = (pts[sel] - pose[:3]) @ pose_to_matrix(pose)[:3, :3]
-            cost, inliers, rmse = _fit(models[i], local, cfg)
-            if cost > cfg.skip_ratio * fitted[i]:  # else the prediction fits as well as the last solution
-                corr, rmse, inliers = _icp(models[i], local, cfg)  # no culling here: it lost objects mid-turn
-                moved = local @ corr[:3, :3].T + corr[:3, 3]
-                cost_icp = _fit_cost(models[i], moved, cfg)
-                if cost_icp < (1 - cfg.min_gain) * cost:
-                    pose = compose(pose, pose_from_matrix(np.linalg.inv(corr)))
-                    local, cost = moved, cost_icp
-                # else no better than the prediction: a half-hidden canvas would slide along itself
-                fitted[i] = cost
-            flip = unflip(models[i], local, cols[sel], cost, cfg) if models[i].can_flip else None
-            if flip is not None:
-                pose, turned[i] = compose(pose, pose_from_matrix(flip)), True
-            poses[t, i] = pose
-            if inliers < cfg.min_points:
-                status[t, i] = TrackStatus.LOST
-            elif rmse > cfg.suspect_rmse_m:
+            pose, cost, inliers, rmse, turned[i] = _register(models[i], pts[sel], cols[sel], pred[i], fitted[i], cfg)
+            fitted[i] = cost
+            status[t, i] = _status(inliers, rmse, cfg)
+            moving = i > 0 and (rest is None or not rest.anchored[i])  # a resting object has its own checks
+            if moving and status[t, i] != TrackStatus.LOST and seen_through(
+                    models[i].surface, models[i].normals, pose_to_matrix(pose), depth[t], K, T_world_cam) > cfg.max_seen_through:
                 status[t, i] = TrackStatus.SUSPECT
+                if known[0] and status[t, 0] != TrackStatus.LOST and not np.isnan(grip[i, 0]):
+                    carried = pred.copy()
+                    carried[i] = compose(poses[t, 0], grip[i])
+                    retry = _retry(i, carried, pts, cols, depth[t], K, T_world_cam, models, known, cfg)
+                    if retry is not None:
+                        pose, fitted[i] = retry
+                        status[t, i], turned[i] = TrackStatus.OK, True  # a correction, not motion
+            poses[t, i] = pose
         poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
         if rest is not None:
             seen = measured & (status[t] != TrackStatus.LOST)
@@ -330,6 +406,9 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
             for i, p in zip(search[ok], found_poses[ok]):
                 poses[t, i], status[t, i], known[i] = p, TrackStatus.SUSPECT, True
         good = status[t] != TrackStatus.LOST
+        grip, in_hand = _grips(poses[t], status[t] == TrackStatus.OK, prev, in_hand, grip, cfg)
+        if rest is not None:
+            grip[rest.anchored] = np.nan  # put down
         if t > 0:
             moved = good & (lost_for == 0)  # a velocity needs two good frames in a row
             dx[moved] = poses[t, moved, :3] - prev[moved, :3]

@@ -73,3 +73,27 @@ def test_a_resting_block_hidden_by_something_nearer_is_held_and_one_seen_through
     assert (status[start + 1:, i] == expected).all(), status[:, i]
     if expected == TrackStatus.SUSPECT:
         assert np.linalg.norm(poses[start:, i, :3] - gt.poses[start:n, i, :3], axis=1).max() < 0.003
+
+
+@pytest.fixture(scope="module")
+def painting(tasks, tmp_path_factory):
+    task = tasks["painting"]
+    out = tmp_path_factory.mktemp("rec") / "painting"
+    record(task, RecordConfig(episodes=1, seed=13, workers=1, rig=CameraRig(CameraConfig(), DepthNoiseConfig())), out)
+    path = out / "episode_000000.mcap"
+    return task, read_recording(path), read_ground_truth(path)
+
+
+def test_a_held_brush_follows_the_hand_where_icp_would_slide_it_along_its_handle(painting):
+    """The brush is a long round handle: moved along it (dipped, stroked), ICP finds the same
+    fit where it was. The depth image then sees past half of it; the tracker tries again from
+    where the hand carried it. (Before, this recording's brush p95 was 48 mm, with 13 frames
+    2–10 cm off marked ok.)"""
+    task, rec, gt = painting
+    models = object_models(task, TrackerConfig(), 0)
+    poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, gt.poses[0], TrackerConfig(),
+                          rest=rest_state(task, models))
+    brush = task.names.index("brush")
+    err_mm = np.linalg.norm(poses[:, brush, :3] - gt.poses[:, brush, :3], axis=1) * 1000
+    assert np.percentile(err_mm, 95) < 10.0, np.percentile(err_mm, [50, 95, 100])
+    assert np.mean((err_mm > 20.0) & (status[:, brush] == TrackStatus.OK)) < 0.03
