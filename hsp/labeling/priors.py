@@ -114,10 +114,11 @@ class PriorScores:
         miss = np.log(cfg.tool_epsilon / max(n - 1, 1))
         self._unary = np.where(evidence[:, None] == i[None, :], hit, miss)  # (H, P)
         self._unary[evidence < 0] = np.log(1.0 / n)  # nothing has moved yet: no evidence
-        self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2))  # (P, H, 3)
+        self._unary = self._unary.astype(np.float32)
+        self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2), dtype=np.float32)  # (P, H, 3)
         self._sq = np.sum(self._xyz**2, axis=-1)  # (P, H)
         dist = np.sqrt(self._sq)
-        self._near = np.where(self.ok.T & self._still(), -cfg.alpha * dist, NEG)
+        self._near = np.where(self.ok.T & self._still(), -cfg.alpha * dist, NEG).astype(np.float32)
 
     def _still(self, half_window: int = 2) -> np.ndarray:
         """Frames where the tool is still relative to the target ``(P, H)``: its mean step
@@ -133,14 +134,14 @@ class PriorScores:
         return self._unary[t]
 
     def jump(self, t: int) -> np.ndarray:
-        return self._near[:, t:] - np.log(self.H - t)
+        return self._near[:, t:] - float(np.log(self.H - t))
 
     def motion(self, t: int) -> np.ndarray:
         """‖δ − m·u/‖u‖‖² expanded so that no (P, H, 3) temporary is built: δ is the step
         t → t+1, u = w_k − x_t the way to way-point k, m = min(‖δ‖, ‖u‖)."""
         usable = self.ok[t] & self.ok[t + 1] if t < self.H - 1 else np.zeros(self.P, bool)
         if not usable.any():
-            return np.zeros((self.P, self.H - t))
+            return np.zeros((self.P, self.H - t), np.float32)
         x = self._xyz[:, t]  # (P, 3)
         delta = self._xyz[:, t + 1] - x
         dots = np.matmul(self._xyz[:, t:], np.stack([x, delta], axis=-1))  # (P, H - t, 2)
@@ -150,4 +151,5 @@ class PriorScores:
         m = np.minimum(np.sqrt(s2), dist)
         delta_u = dots[..., 1] - np.sum(delta * x, axis=1)[:, None]
         err2 = s2 + m * m - 2 * m / np.maximum(dist, 1e-9) * delta_u
-        return np.where(usable[:, None], -err2 / (2 * self.cfg.motion_sigma_m**2), 0.0)
+        err2 *= -1.0 / (2 * self.cfg.motion_sigma_m**2)
+        return err2 if usable.all() else np.where(usable[:, None], err2, np.float32(0.0))

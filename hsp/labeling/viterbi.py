@@ -52,7 +52,7 @@ class Transition:
     def logs(self, P: int) -> tuple[float, float, float, float]:
         stay_pair = np.log(self.gamma)
         switch_pair = np.log((1 - self.gamma) / max(P - 1, 1)) if P > 1 else NEG
-        return stay_pair, switch_pair, np.log(self.beta), np.log1p(-self.beta)
+        return float(stay_pair), float(switch_pair), float(np.log(self.beta)), float(np.log1p(-self.beta))
 
 
 @dataclass
@@ -73,7 +73,7 @@ def viterbi(scores: Scores, transition: Transition) -> Path:
     best_p = np.zeros((H, 2), np.int32)  # top-2 pairs of max_k' F_{t-1}
 
     # F holds F_t(p, k) for k = t, …, H−1 only (way-points are never in the past).
-    F = np.log(1.0 / P) + jump_k + scores.jump(0) + scores.unary(0)[:, None] + scores.motion(0)
+    F = float(np.log(1.0 / P) + jump_k) + scores.jump(0) + scores.unary(0)[:, None] + scores.motion(0)
     rows = np.arange(P)
     for t in range(1, H):
         bk = F.argmax(axis=1)
