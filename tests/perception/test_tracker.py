@@ -19,13 +19,19 @@ from hsp.sim.depth_noise import DepthNoiseConfig
 from hsp.sim.render import load_mesh
 
 
+def _recorded(task, seed, tmp_path_factory):
+    """One noisy 640×480 recording of ``task``: the recording and its ground truth."""
+    out = tmp_path_factory.mktemp("rec") / task.name
+    record(task, RecordConfig(episodes=1, seed=seed, workers=1, rig=CameraRig(CameraConfig(), DepthNoiseConfig())), out)
+    path = out / "episode_000000.mcap"
+    return read_recording(path), read_ground_truth(path)
+
+
 @pytest.fixture(scope="module")
 def episode(tasks, tmp_path_factory):
     task = tasks["stacking-1"]
-    out = tmp_path_factory.mktemp("rec") / "stacking-1"
-    record(task, RecordConfig(episodes=1, seed=4, workers=1, rig=CameraRig(CameraConfig(), DepthNoiseConfig())), out)
-    path = out / "episode_000000.mcap"
-    return task, read_recording(path), read_ground_truth(path), [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
+    rec, gt = _recorded(task, 4, tmp_path_factory)
+    return task, rec, gt, [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
 
 
 def test_tracking_from_the_first_pose_stays_within_millimetres(episode):
@@ -77,11 +83,7 @@ def test_a_resting_block_hidden_by_something_nearer_is_held_and_one_seen_through
 
 @pytest.fixture(scope="module")
 def painting(tasks, tmp_path_factory):
-    task = tasks["painting"]
-    out = tmp_path_factory.mktemp("rec") / "painting"
-    record(task, RecordConfig(episodes=1, seed=13, workers=1, rig=CameraRig(CameraConfig(), DepthNoiseConfig())), out)
-    path = out / "episode_000000.mcap"
-    return task, read_recording(path), read_ground_truth(path)
+    return tasks["painting"], *_recorded(tasks["painting"], 13, tmp_path_factory)
 
 
 def test_a_held_brush_follows_the_hand_where_icp_would_slide_it_along_its_handle(painting):
