@@ -260,19 +260,32 @@ def _grips(poses: np.ndarray, ok: np.ndarray, prev: np.ndarray, in_hand: np.ndar
     return grip, rel
 
 
+def _owned(owner: np.ndarray, i: int, cfg: TrackerConfig) -> np.ndarray:
+    """Indices of the scene points object ``i`` owns, thinned evenly to at most about
+    ``cfg.max_points`` (a wheel's top: thousands)."""
+    sel = np.flatnonzero(owner == i)
+    return sel[:: -(-sel.size // cfg.max_points)] if sel.size > cfg.max_points else sel
+
+
+def _seen_past(model: SurfaceModel, pose: np.ndarray, depth: np.ndarray, K: np.ndarray,
+               T_world_cam: np.ndarray) -> float:
+    """:func:`~hsp.perception.rest.seen_through` of ``model`` at world ``pose (7,)``."""
+    return seen_through(model.surface, model.normals, pose_to_matrix(pose), depth, K, T_world_cam)
+
+
 def _retry(i: int, pred: np.ndarray, pts: np.ndarray, cols: np.ndarray, depth: np.ndarray, K: np.ndarray,
            T_world_cam: np.ndarray, models: list[SurfaceModel], known: np.ndarray,
            cfg: TrackerConfig) -> tuple[np.ndarray, float] | None:
     """Object ``i`` registered again from ``pred[i]`` (the others' predictions decide which
     points are its): the pose and fit cost if it fits (status ok) without the depth image
     seeing through it, else None."""
-    sel = np.flatnonzero(assign_points(pts, cols, models, pred, cfg, known) == i)
-    sel = sel[:: -(-sel.size // cfg.max_points)] if sel.size > cfg.max_points else sel
+    sel = _owned(assign_points(pts, cols, models, pred, cfg, known), i, cfg)
     if sel.size < cfg.min_points:
         return None
     pose, cost, inliers, rmse, _ = _register(models[i], pts[sel], cols[sel], pred[i], 0.0, cfg)  # ICP always
-    if _status(inliers, rmse, cfg) != TrackStatus.OK or seen_through(
-            models[i].surface, models[i].normals, pose_to_matrix(pose), depth, K, T_world_cam) > cfg.max_seen_through:
+    if _status(inliers, rmse, cfg) != TrackStatus.OK:
+        return None
+    if _seen_past(models[i], pose, depth, K, T_world_cam) > cfg.max_seen_through:
         return None
     return pose, cost
 
@@ -362,13 +375,11 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
         pred = predict(prev, dx, drot, cfg.damping)
         owner = assign_points(pts, cols, models, pred, cfg, known)
         for i in np.flatnonzero(known):
-            sel = np.flatnonzero(owner == i)
-            sel = sel[:: -(-sel.size // cfg.max_points)] if sel.size > cfg.max_points else sel  # a wheel's top: thousands
+            sel = _owned(owner, i, cfg)
             if sel.size < cfg.min_points:
                 poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
-                if rest is not None and rest.anchored[i] and seen_through(
-                        models[i].surface, models[i].normals, pose_to_matrix(pred[i]), depth[t], K,
-                        T_world_cam) <= rest.cfg.max_seen_through:
+                if rest is not None and rest.anchored[i] and _seen_past(
+                        models[i], pred[i], depth[t], K, T_world_cam) <= rest.cfg.max_seen_through:
                     status[t, i] = TrackStatus.SUSPECT  # hidden where it rests: held there
                 continue
             measured[i] = True
@@ -376,8 +387,8 @@ def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.nda
             fitted[i] = cost
             status[t, i] = _status(inliers, rmse, cfg)
             moving = i > 0 and (rest is None or not rest.anchored[i])  # a resting object has its own checks
-            if moving and status[t, i] != TrackStatus.LOST and seen_through(
-                    models[i].surface, models[i].normals, pose_to_matrix(pose), depth[t], K, T_world_cam) > cfg.max_seen_through:
+            if moving and status[t, i] != TrackStatus.LOST and _seen_past(
+                    models[i], pose, depth[t], K, T_world_cam) > cfg.max_seen_through:
                 status[t, i] = TrackStatus.SUSPECT
                 if known[0] and status[t, 0] != TrackStatus.LOST and not np.isnan(grip[i, 0]):
                     carried = pred.copy()
