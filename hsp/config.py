@@ -3,7 +3,7 @@ the defaults). Commands read their section from it; command-line options overrid
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -43,9 +43,23 @@ def param(params: dict[str, Any], key: str, default: Any) -> Any:
 
 def section(params: dict[str, Any], name: str, cls: type[C], ignore: tuple[str, ...] = ()) -> C:
     """A config dataclass from the ``name`` section; unknown keys are an error naming them."""
-    values = {k: v for k, v in (params.get(name) or {}).items() if k not in ignore}
-    known = {f.name for f in fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(values) - known)
+    return _build(params.get(name) or {}, name, cls, ignore)
+
+
+def _build(values: dict[str, Any], where: str, cls: type[C], ignore: tuple[str, ...] = ()) -> C:
+    """``cls`` from a mapping; a field whose default is itself a config dataclass (the
+    tracker's ``rest`` and ``edges``) is built from its nested mapping the same way."""
+    if not isinstance(values, dict):
+        raise HspError(f"params.yaml: {where}: expected a mapping, got {values!r}")
+    values = {k: v for k, v in values.items() if k not in ignore}
+    known = {f.name: f for f in fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(values) - set(known))
     if unknown:
-        raise HspError(f"params.yaml: {name}: unknown keys {unknown} (known: {sorted(known)})")
-    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+        raise HspError(f"params.yaml: {where}: unknown keys {unknown} (known: {sorted(known)})")
+    out = {}
+    for k, v in values.items():
+        if is_dataclass(known[k].default):
+            out[k] = _build(v, f"{where}.{k}", type(known[k].default))
+        else:
+            out[k] = tuple(v) if isinstance(v, list) else v
+    return cls(**out)

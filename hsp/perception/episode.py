@@ -17,7 +17,7 @@ import numpy as np
 from hsp.errors import HspError
 from hsp.geometry.symmetry import z_folds
 from hsp.perception.initialize import initialize
-from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestState
+from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState
 from hsp.perception.tracker import SurfaceModel, TrackerConfig, scene_points, track
 from hsp.recording.reader import Recording
 from hsp.sim.render import load_mesh
@@ -42,7 +42,7 @@ def object_models(task: Task, cfg: TrackerConfig, seed: int) -> list[SurfaceMode
             for i, o in enumerate(task.spec.objects)]
 
 
-def rest_state(task: Task, models: list[SurfaceModel]) -> RestState:
+def rest_state(task: Task, models: list[SurfaceModel], cfg: RestConfig = RestConfig()) -> RestState:
     """Which objects can rest and on which body axes: every face of a cube, the z axis of
     the others as the layout stands them; never the end-effector or what starts in the air.
     Objects the task mounts on a revolute joint (lug nuts) never tilt."""
@@ -51,7 +51,7 @@ def rest_state(task: Task, models: list[SurfaceModel]) -> RestState:
     fold = [z_folds(o.symmetry) for o in task.spec.objects]  # about the up axis
     periods = [2 * np.pi / f if f else 0.0 for f in fold]
     mounted = [o.place.joint == "revolute_z" for o in task.spec.objects]
-    return RestState(axes, [m.surface for m in models], periods, mounted=mounted)
+    return RestState(axes, [m.surface for m in models], periods, cfg, mounted=mounted)
 
 
 def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg: TrackerConfig = TrackerConfig(),
@@ -71,5 +71,5 @@ def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg:
         return poses[idx], ok[idx]
 
     poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, first, cfg, found, redetect, progress,
-                          rest_state(task, models))
+                          rest_state(task, models, cfg.rest))
     return TrackedEpisode(poses, status, time.perf_counter() - start, first_frame)

@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix, relative
 from hsp.perception.edges import EdgeConfig, crease_edges, image_gradient, refine_on_edges
 from hsp.perception.pointcloud import backproject, colour_match, palette_mask
-from hsp.perception.rest import RestState, seen_through
+from hsp.perception.rest import RestConfig, RestState, seen_through
 from hsp.sim.render import Mesh
 
 
@@ -71,6 +71,8 @@ class TrackerConfig:
     replace ICP's (see :func:`unflip`)."""
     edges: EdgeConfig = EdgeConfig()
     """Search of a resting object's heading and position on the image edges."""
+    rest: RestConfig = RestConfig()
+    """When an object is at rest, and how it is held there."""
     edge_tolerance: float = 0.1
     """The edges' pose is kept only if it fits the depth points within this fraction of
     the fit cost where it started (a hand's edges next to a block must not pull it)."""
