@@ -7,7 +7,8 @@ decoding excluded): one at a time in one process, then both at once in two proce
 the first-frame estimate (a fixed cost per episode, which weighs on 150 frames). Issue 4's
 target: ≥ 30 frames/s with six objects (tire-removal) on this 2-core machine; the paper's
 GPU tracker: 90.
-Run: ``python bench/tracking_speed.py [--recordings data/recordings] [--frames 150] [--repeats 3]``.
+Run: ``python bench/tracking_speed.py [--recordings data/recordings] [--frames 150] [--repeats 3] [--tasks …]``;
+``--frames 0`` tracks whole episodes (the first-frame estimate then weighs as in ``hsp parse``).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ def _rates(job: tuple[str, Path, int]) -> tuple[float, float]:
     name, path, frames = job
     task, cfg = load_task(name), TrackerConfig()
     rec = read_recording(path)
-    rec.rgb, rec.depth = rec.rgb[:frames], rec.depth[:frames]
+    if frames > 0:
+        rec.rgb, rec.depth = rec.rgb[:frames], rec.depth[:frames]
     tracked = track_recording(task, rec, object_models(task, cfg, 0), cfg)
     return len(rec.rgb) / tracked.seconds, (len(rec.rgb) - 1) / (tracked.seconds - tracked.first_frame_seconds)
 
@@ -43,7 +45,8 @@ def _rates(job: tuple[str, Path, int]) -> tuple[float, float]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--recordings", type=Path, default=Path("data/recordings"))
-    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--frames", type=int, default=150, help="first frames of each episode; 0: whole episodes")
+    ap.add_argument("--tasks", nargs="*", default=None, help="default: every task")
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     print(f"frames/s, median of {args.repeats}; in brackets, frame-to-frame tracking alone (first-frame estimate excluded)")
@@ -51,7 +54,7 @@ def main() -> None:
     ctx = multiprocessing.get_context("spawn")
     one_pool, pool = (ProcessPoolExecutor(k, mp_context=ctx, initializer=pin_to_one_core, initargs=(ctx.Value("i", 0),))
                       for k in (1, 2))
-    for name in list_tasks():
+    for name in args.tasks or list_tasks():
         paths = sorted((args.recordings / name).glob("*.mcap"))[:2]
         if len(paths) < 2:
             print(f"{name:14s} needs two recordings under {args.recordings / name}")
