@@ -168,22 +168,22 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Surfa
     for i, (obj, model) in enumerate(zip(task.objects, models)):
         if only is not None and i not in only:
             continue
-        mask = np.flatnonzero(palette_mask(cols, palettes[i], cfg.colour_tolerance))
-        anchor = _anchor(model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
-        groups = _clusters(pts[mask])
         key = palettes[i].tobytes()
         used = taken.setdefault(key, set())
         rest_height = mesh_extent(task.mesh(i))[1] if first_frame and i > 0 and obj.place.support == "table" else None
-        shifts = [np.zeros(3)] if rest_height is not None else AIR_SHIFTS  # visible part vs anchor, in the air
-        yaws = _yaw_grid(obj.symmetry)
         wide = max(0.03, model.radius / 3)  # a wheel's visible part is centred centimetres off its own centre
         coarse = TrackerConfig(gates_m=(wide, 0.015, 0.006), tukey_m=max(cfg.tukey_m, wide if wide > 0.03 else 0.0))
-        fits = [g for g, idx in enumerate(groups) if _extent(pts[mask[idx]]) <= 2 * (model.radius + cfg.crop_margin_m)]
         coloured = np.flatnonzero(model.colour_mask(cols, cfg.colour_tolerance))
         reach = model.radius + cfg.crop_margin_m
-        twins = sum(p.tobytes() == key for p in palettes) - 1
         same = (key, task.mesh(i), obj.symmetry, rest_height)  # identical objects share one screening
         if same not in screenings:
+            mask = np.flatnonzero(palette_mask(cols, palettes[i], cfg.colour_tolerance))
+            anchor = _anchor(model.face_centres, model.face_rgb, palettes[i], cfg.colour_tolerance)
+            groups = _clusters(pts[mask])
+            fits = [g for g, idx in enumerate(groups) if _extent(pts[mask[idx]]) <= 2 * reach]
+            twins = sum(p.tobytes() == key for p in palettes) - 1
+            shifts = [np.zeros(3)] if rest_height is not None else AIR_SHIFTS  # visible part vs anchor, in the air
+            yaws = _yaw_grid(obj.symmetry)
             screen = TrackerConfig(gates_m=coarse.gates_m[:1], tukey_m=coarse.tukey_m)
             screenings[same] = []
             for g in (fits or list(range(len(groups))))[: MAX_CLUSTERS + twins]:
