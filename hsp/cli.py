@@ -168,35 +168,69 @@ def label(
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     out: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet]"),
     recordings: Optional[Path] = typer.Option(None, help="recordings, to score the labels against the demonstrator's annotation"),
-    policy: Optional[Path] = typer.Option(None, help="trained policy directory: EM refinement for up to label.em_iterations rounds"),
+    policy: Optional[Path] = typer.Option(None, help="trained policy directory: EM refinement for up to label.em_iterations "
+                                          "rounds (report: labels_em.json)"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
-    """Infer tool, target and way-point per frame with Viterbi over the paper's priors."""
+    """Infer tool, target and way-point per frame with Viterbi over the paper's priors
+    (with --policy, then EM rounds over the trained networks)."""
     from hsp.labeling.priors import PriorConfig
     from hsp.labeling.stage import label_dataset
     from hsp.tasks.registry import load_task
 
     try:
-        if policy is not None:  # hsp.labeling.em.em_label runs EM given the trained networks as a score model
-            raise HspError(f"--policy {policy}: trained policies cannot be loaded yet: `hsp train`, "
-                           "which will write them, does not exist yet. EM itself is hsp.labeling.em.em_label, which takes any score model.")
         params = load_params(params_file)
         cfg = section(params, "label", PriorConfig, ignore=("em_iterations",))
         t = load_task(task)
         ds = dataset or Path("data/datasets") / task
         out_file = out or Path("data/labels") / f"{task}.parquet"
-        log.info("label %s: read %s", task, ds)
-        report = label_dataset(t, ds, out_file, cfg, recordings)
-        _write_report(reports / task / "labels.json", report, out_file)
+        em = None
+        if policy is not None:
+            from hsp.policy.stage import PolicyRefinement
+            from hsp.policy.train import TrainConfig, load
+
+            em = PolicyRefinement(load(policy), policy, section(params, "train", TrainConfig),
+                                  int(param(params, "label.em_iterations", 3)), int(param(params, "seed", 0)))
+        log.info("label %s: read %s%s", task, ds, f" (EM over {policy})" if policy else "")
+        report = label_dataset(t, ds, out_file, cfg, recordings, em)
+        _write_report(reports / task / ("labels_em.json" if em else "labels.json"), report, out_file)
     except HspError as e:
         _fail(e)
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def train(task: str = typer.Argument(...)) -> None:
-    """Train a policy (not available yet)."""
-    _not_available("train", 7)
+@app.command()
+def train(
+    task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
+    method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels); the baselines are not built yet"),
+    dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
+    labels: Optional[Path] = typer.Option(None, help="pseudo-labels [data/labels/TASK.parquet]"),
+    out: Optional[Path] = typer.Option(None, help="model directory [data/models/TASK/METHOD]"),
+    iterations: Optional[int] = typer.Option(None, help="gradient steps [params: train.iterations]"),
+    reports: Path = typer.Option(Path("reports"), help="reports directory"),
+    params_file: Optional[Path] = PARAMS_OPTION,
+) -> None:
+    """Train π_h, π_m and π_l on the pose dataset and its pseudo-labels."""
+    import dataclasses
+
+    from hsp.policy.stage import train_task
+    from hsp.policy.train import TrainConfig
+    from hsp.tasks.registry import load_task
+
+    try:
+        if method != "proposed":
+            raise HspError(f"--method {method}: only 'proposed' is built yet (the baselines are not)")
+        params = load_params(params_file)
+        cfg = section(params, "train", TrainConfig)
+        if iterations is not None:
+            cfg = dataclasses.replace(cfg, iterations=iterations)
+        t = load_task(task)
+        out_dir = out or Path("data/models") / task / method
+        report = train_task(t, dataset or Path("data/datasets") / task, labels or Path("data/labels") / f"{task}.parquet",
+                            out_dir, cfg, int(param(params, "seed", 0)))
+        _write_report(reports / task / method / "train.json", report, out_dir)
+    except HspError as e:
+        _fail(e)
 
 
 @app.command(name="eval", context_settings={"allow_extra_args": True, "ignore_unknown_options": True})

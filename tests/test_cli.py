@@ -67,8 +67,32 @@ def test_parse_ground_truth_ablation(tmp_path):
     wrong = runner.invoke(app, ["label", "stacking-1", "--dataset", str(ds), "--out", str(tmp_path / "x.parquet")])
     assert wrong.exit_code == 1 and "not those of task 'stacking-1'" in wrong.output
 
+    # train on the labels, then EM over the trained networks (two rounds: the second retrains)
+    params = tmp_path / "params.yaml"
+    params.write_text("train: {iterations: 3, batch_steps: 64}\nlabel: {em_iterations: 2}\n")
+    model = tmp_path / "model"
+    result = runner.invoke(app, ["train", "painting", "--dataset", str(ds), "--labels", str(labels), "--out", str(model),
+                                 "--reports", str(reports), "--params", str(params)])
+    assert result.exit_code == 0, result.output
+    trained = json.loads((reports / "painting" / "proposed" / "train.json").read_text())
+    assert trained["iterations"] == 3 and trained["frames"] == report["frames"] and {"final_loss", "seconds"} <= set(trained)
+    assert sorted(p.name for p in model.iterdir()) == ["config.json", "model.safetensors"]
+    em_labels = tmp_path / "em.parquet"
+    result = runner.invoke(app, ["label", "painting", "--dataset", str(ds), "--out", str(em_labels), "--policy", str(model),
+                                 "--reports", str(reports), "--params", str(params)])
+    assert result.exit_code == 0, result.output
+    em = json.loads((reports / "painting" / "labels_em.json").read_text())
+    assert 1 <= em["em_rounds"] <= 2 and len(pd.read_parquet(em_labels)) == report["frames"]
+    other = runner.invoke(app, ["label", "stacking-1", "--dataset", str(ds), "--policy", str(model), "--out", str(tmp_path / "y.parquet")])
+    assert other.exit_code == 1 and "not those of task 'stacking-1'" in other.output
+    short = runner.invoke(app, ["train", "painting", "--dataset", str(ds), "--labels", str(tmp_path / "none.parquet"),
+                                "--out", str(tmp_path / "m2")])
+    assert short.exit_code == 1 and "labels file not found" in short.output
+    baseline = runner.invoke(app, ["train", "painting", "--method", "gail", "--dataset", str(ds)])
+    assert baseline.exit_code == 1 and "only 'proposed'" in baseline.output
 
-@pytest.mark.parametrize("stage", ["train", "eval"])
+
+@pytest.mark.parametrize("stage", ["eval"])
 def test_unfinished_stages_say_so(stage):
     result = runner.invoke(app, [stage, "painting"])
     assert result.exit_code == 1
@@ -96,9 +120,10 @@ def test_unknown_camera_key_is_named(tmp_path):
     assert result.exit_code == 1 and "camera: unknown keys ['widht']" in result.output
 
 
-def test_label_with_a_policy_says_training_is_missing(tmp_path):
-    result = runner.invoke(app, ["label", "painting", "--dataset", str(tmp_path), "--policy", str(tmp_path / "model")])
-    assert result.exit_code == 1 and "hsp train" in result.output and "em_label" in result.output
+def test_label_with_something_that_is_not_a_policy_is_a_clear_error(tmp_path):
+    result = runner.invoke(app, ["label", "painting", "--dataset", str(tmp_path), "--policy", str(tmp_path / "model"),
+                                 "--out", str(tmp_path / "l.parquet")])
+    assert result.exit_code == 1 and "not a trained policy" in result.output and "hsp train" in result.output
 
 
 def test_view_writes_video_timeline_and_rerun_recording(tmp_path):

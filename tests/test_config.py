@@ -15,6 +15,14 @@ def test_the_params_file_spells_out_the_tracker_defaults():
     assert set(params["tracker"]["rest"]) and set(params["tracker"]["edges"])
 
 
+def test_the_params_file_states_every_training_knob_at_its_default():
+    from hsp.policy.train import TrainConfig
+
+    params = load_params(Path(__file__).parents[1] / "params.yaml")
+    assert section(params, "train", TrainConfig) == TrainConfig()
+    assert set(params["train"]) == set(TrainConfig.__dataclass_fields__)
+
+
 def test_nested_sections_override_one_knob_and_name_unknown_keys():
     cfg = section({"tracker": {"rest": {"rest_frames": 4}, "edges": {"samples": 3}}}, "tracker", TrackerConfig)
     assert cfg.rest.rest_frames == 4 and cfg.rest.still_m == TrackerConfig().rest.still_m

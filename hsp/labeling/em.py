@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -24,12 +25,24 @@ from hsp.labeling.label import EpisodeLabels, canonical_poses, label_episode
 from hsp.labeling.priors import PriorConfig, pairs_of
 from hsp.labeling.viterbi import Scores
 
+if TYPE_CHECKING:
+    from hsp.tasks.registry import Task
+
 log = logging.getLogger(__name__)
 
-ScoreModel = Callable[[np.ndarray, np.ndarray], Scores]
-"""(world poses (H, n, 7), status (H, n)) → log-scores of that episode."""
+ScoreModel = Callable[[np.ndarray, np.ndarray, EpisodeLabels], Scores]
+"""(world poses (H, n, 7), status (H, n), the episode's labels of the last round) → its
+log-scores; the labels give the networks their history (the previous pairs and way-points)."""
 Fit = Callable[[list[EpisodeLabels]], ScoreModel]
 """Labels of every episode → the networks trained on them, as a score model."""
+
+
+class Refinement(Protocol):
+    """EM as the label stage runs it: labels of a task's episodes (world poses, status)
+    and the fraction of frames relabelled in each round."""
+
+    def run(self, task: "Task", poses: list[np.ndarray], status: list[np.ndarray],
+            cfg: PriorConfig) -> tuple[list[EpisodeLabels], list[float]]: ...
 
 
 @dataclass
@@ -59,8 +72,8 @@ def em_label(episodes: list[tuple[np.ndarray, np.ndarray]], cfg: PriorConfig, fi
     for round_ in range(iterations):
         model = fit(labels)
         new = []
-        for w, s in episodes:
-            scores = model(w, s)
+        for (w, s), last in zip(episodes, labels):
+            scores = model(w, s, last)
             if (scores.H, scores.P) != (len(w), len(pairs_of(w.shape[1]))):
                 raise HspError(f"EM round {round_ + 1}: the model scored {scores.H} frames × {scores.P} pairs for an "
                                f"episode of {len(w)} frames and {w.shape[1]} objects")

@@ -16,6 +16,7 @@ from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
 from hsp.geometry import compose, relative
+from hsp.labeling.em import Refinement
 from hsp.labeling.label import EpisodeLabels, canonical_poses, label_episode
 from hsp.labeling.metrics import label_metrics
 from hsp.labeling.priors import PriorConfig
@@ -50,17 +51,24 @@ def canonical_waypoints(gt: GroundTruth, symmetries: list[str]) -> np.ndarray:
 
 
 def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfig,
-                  recordings_dir: Path | None = None) -> dict[str, float | int]:
+                  recordings_dir: Path | None = None, em: Refinement | None = None) -> dict[str, float | int]:
+    """Labels every episode of ``dataset_dir`` (Viterbi over the priors; with ``em``, then
+    EM rounds over the trained policy) into ``out_file``; the report scores them against the
+    recordings' annotation when ``recordings_dir`` is given."""
     start = time.perf_counter()
     poses, status, meta = load_episodes(dataset_dir, task.name)
     if meta["objects"] != task.names:
         raise HspError(f"{dataset_dir}: dataset objects {meta['objects']} are not those of task {task.name!r} {task.names}")
     symmetries = [o.symmetry for o in task.objects]
-    labels = [label_episode(p, s, cfg, symmetries=symmetries)
-              for p, s in track(list(zip(poses, status)), description=f"label {task.name}")]
+    report: dict[str, float | int] = {"episodes": len(poses), "frames": int(sum(len(p) for p in poses))}
+    if em is None:
+        labels = [label_episode(p, s, cfg, symmetries=symmetries)
+                  for p, s in track(list(zip(poses, status)), description=f"label {task.name}")]
+    else:
+        labels, changed = em.run(task, poses, status, cfg)
+        report |= {"em_rounds": len(changed), "em_changed_fraction_last": changed[-1] if changed else 0.0}
     with atomic_path(Path(out_file)) as tmp:
         labels_frame(labels).to_parquet(tmp, index=False)
-    report: dict[str, float | int] = {"episodes": len(labels), "frames": int(sum(len(p) for p in poses))}
     if recordings_dir is not None:
         recs = list_recordings(recordings_dir)
         if len(recs) != len(labels):

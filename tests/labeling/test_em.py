@@ -40,7 +40,7 @@ class Prefer(PriorScores):
 
 def test_a_model_that_agrees_with_the_labels_stops_em_after_one_round():
     ep = _episode()
-    result = em_label([ep], PriorConfig(), lambda labels: lambda w, s: PriorScores(w, s == 0, PriorConfig()), iterations=3)
+    result = em_label([ep], PriorConfig(), lambda labels: lambda w, s, last: PriorScores(w, s == 0, PriorConfig()), iterations=3)
     assert result.changed == [0.0]
 
 
@@ -50,7 +50,7 @@ def test_the_fitted_model_replaces_the_priors_until_labels_settle():
 
     def fit(labels):
         fits.append([lab.target.copy() for lab in labels])
-        return lambda w, s: Prefer(w, s, pair=int(np.flatnonzero((pairs_of(3) == [1, 2]).all(axis=1))[0]))
+        return lambda w, s, last: Prefer(w, s, pair=int(np.flatnonzero((pairs_of(3) == [1, 2]).all(axis=1))[0]))
 
     result = em_label([ep], PriorConfig(), fit, iterations=5)
     assert len(fits) == 2 and result.changed[0] > 0 and result.changed[1] == 0.0
@@ -62,7 +62,7 @@ def test_a_model_of_the_wrong_shape_is_a_clear_error():
     ep = _episode()
     short = (ep[0][:10], ep[1][:10])
     with pytest.raises(HspError, match="scored 10 frames"):
-        em_label([ep], PriorConfig(), lambda labels: lambda w, s: PriorScores(*short[:1], short[1] == 0, PriorConfig()), 1)
+        em_label([ep], PriorConfig(), lambda labels: lambda w, s, last: PriorScores(*short[:1], short[1] == 0, PriorConfig()), 1)
 
 
 def test_with_symmetries_the_model_sees_canonical_poses():
@@ -74,7 +74,7 @@ def test_with_symmetries_the_model_sees_canonical_poses():
     seen = []
 
     def fit(labels):
-        def model(w, s):
+        def model(w, s, last):
             seen.append(w[:, 2, 3:].copy())
             return PriorScores(w, s == 0, PriorConfig())
         return model

@@ -1,0 +1,140 @@
+"""The ``train`` stage (pose dataset + pseudo-labels → trained π_h, π_m, π_l) and the EM
+model that ``hsp label --policy`` scores with."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hsp.dataset.features import TrackStatus
+from hsp.dataset.reader import load_episodes
+from hsp.errors import HspError
+from hsp.labeling.em import Fit, ScoreModel, em_label
+from hsp.labeling.label import EpisodeLabels, canonical_poses
+from hsp.labeling.priors import PriorConfig, pairs_of
+from hsp.labeling.stage import WAYPOINT_COLUMNS
+from hsp.policy.features import Steps, episode_steps
+from hsp.policy.scores import PolicyScores, pair_indices
+from hsp.policy.train import Policy, TrainConfig, save, split, train, validate
+from hsp.tasks.registry import Task
+
+log = logging.getLogger(__name__)
+LABEL_COLUMNS = ["episode_index", "frame_index", "tool", "target", "waypoint_index", *WAYPOINT_COLUMNS]
+
+
+def semantic_classes(task: Task) -> tuple[np.ndarray, int]:
+    """Each object's semantic label as an index ``(n,)``, and how many labels there are
+    (the four lug nuts share one)."""
+    names = sorted({o.label for o in task.objects})
+    return np.array([names.index(o.label) for o in task.objects]), len(names)
+
+
+def read_labels(path: Path, lengths: list[int]) -> list[EpisodeLabels]:
+    """Per-episode labels from ``hsp label``'s parquet, checked against the dataset's episodes."""
+    path = Path(path)
+    if not path.is_file():
+        raise HspError(f"{path}: labels file not found (run `hsp label`)")
+    df = pd.read_parquet(path)
+    missing = [c for c in LABEL_COLUMNS if c not in df.columns]
+    if missing:
+        raise HspError(f"{path}: not an hsp labels file (missing columns {missing})")
+    groups = dict(list(df.sort_values(["episode_index", "frame_index"]).groupby("episode_index")))
+    if sorted(groups) != list(range(len(lengths))):
+        raise HspError(f"{path}: labels for episodes {sorted(groups)[:5]}…, the dataset has {len(lengths)} episodes")
+    out = []
+    for e, H in enumerate(lengths):
+        g = groups[e]
+        if len(g) != H:
+            raise HspError(f"{path}: episode {e} has {len(g)} labelled frames, the dataset {H}")
+        out.append(EpisodeLabels(g["tool"].to_numpy(), g["target"].to_numpy(), g["waypoint_index"].to_numpy(),
+                                 g[WAYPOINT_COLUMNS].to_numpy()))
+    return out
+
+
+def labelled_steps(task: Task, world: list[np.ndarray], labels: list[EpisodeLabels]) -> list[Steps]:
+    """Network inputs and targets of every episode (canonical poses, as the labels are)."""
+    classes, n_classes = semantic_classes(task)
+    pairs = pairs_of(len(task.objects))
+    out = []
+    for w, lab in zip(world, labels):
+        pair = pair_indices(pairs, lab.tool, lab.target)
+        if (pair < 0).any():
+            raise HspError(f"labels name a (tool, target) pair that cannot be: {lab.tool[pair < 0][0]}, {lab.target[pair < 0][0]}")
+        out.append(episode_steps(w, pair, lab.waypoint_index, classes, n_classes))
+    return out
+
+
+def train_task(task: Task, dataset_dir: Path, labels_file: Path, out_dir: Path, cfg: TrainConfig,
+               seed: int) -> dict[str, float | int]:
+    start = time.perf_counter()
+    poses, _status, meta = load_episodes(dataset_dir, task.name)
+    if meta["objects"] != task.names:
+        raise HspError(f"{dataset_dir}: dataset objects {meta['objects']} are not those of task {task.name!r} {task.names}")
+    world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
+    labels = read_labels(labels_file, [len(p) for p in poses])
+    steps = labelled_steps(task, world, labels)
+    classes, n_classes = semantic_classes(task)
+    fit_on, held = split(len(steps), cfg.validation_every)
+    log.info("train %s: %d episodes (%d frames) from %s and %s, %d more held out to validate", task.name, len(fit_on),
+             sum(len(steps[i].pair) for i in fit_on), dataset_dir, labels_file, len(held))
+    policy, last = train([steps[i] for i in fit_on], task.names, classes, n_classes, cfg, seed)
+    save(policy, cfg, out_dir)
+    report: dict[str, float | int] = {
+        "iterations": cfg.iterations, "final_loss": last["total"], "loss_pair": last["pair"], "loss_waypoint": last["waypoint"],
+        "loss_action": last["action"], "episodes": len(fit_on), "frames": int(sum(len(steps[i].pair) for i in fit_on)),
+        "validation_episodes": len(held)}
+    if held:
+        report |= {f"validation_{k}": v for k, v in validate(policy, [steps[i] for i in held]).items()}
+        report |= {f"training_{k}": v for k, v in validate(policy, [steps[i] for i in fit_on]).items()}
+    report["seconds"] = time.perf_counter() - start
+    log.info("wrote %s in %.1f s", out_dir, report["seconds"])
+    return report
+
+
+def score_model(policy: Policy, cfg: PriorConfig) -> ScoreModel:
+    """Viterbi scores of an episode from ``policy``: what one EM round labels with."""
+    return lambda world, status, last: PolicyScores(world, status != TrackStatus.LOST, policy, last, cfg)
+
+
+def em_fit(task: Task, policy: Policy, cfg: PriorConfig, train_cfg: TrainConfig, seed: int,
+           world: list[np.ndarray]) -> Fit:
+    """The M-step of EM: the given (already trained) policy first, then π_h, π_m, π_l
+    trained anew on each round's labels."""
+    given = [policy]
+
+    def fit(labels: list[EpisodeLabels]) -> ScoreModel:
+        if given:
+            return score_model(given.pop(), cfg)
+        classes, n_classes = semantic_classes(task)
+        retrained, _ = train(labelled_steps(task, world, labels), task.names, classes, n_classes, train_cfg, seed)
+        return score_model(retrained, cfg)
+
+    return fit
+
+
+@dataclass(frozen=True)
+class PolicyRefinement:
+    """EM over a trained policy (:class:`~hsp.labeling.em.Refinement`): Viterbi over the
+    priors, then over ``policy``'s networks (read from ``source``), then over networks
+    retrained on each new set of labels, for at most ``iterations`` rounds or until no
+    label changes."""
+
+    policy: Policy
+    source: Path
+    train: TrainConfig
+    iterations: int
+    seed: int
+
+    def run(self, task: Task, poses: list[np.ndarray], status: list[np.ndarray],
+            cfg: PriorConfig) -> tuple[list[EpisodeLabels], list[float]]:
+        if self.policy.objects != task.names:
+            raise HspError(f"{self.source}: a policy for objects {self.policy.objects}, not those of task {task.name!r} {task.names}")
+        world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
+        fit = em_fit(task, self.policy, cfg, self.train, self.seed, world)
+        result = em_label(list(zip(world, status)), cfg, fit, self.iterations)
+        return result.labels, result.changed
