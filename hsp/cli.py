@@ -191,7 +191,7 @@ def label(
             from hsp.policy.train import TrainConfig, load
 
             em = PolicyRefinement(load(policy), policy, section(params, "train", TrainConfig),
-                                  int(param(params, "label.em_iterations", 3)), int(param(params, "seed", 0)))
+                                  int(param(params, "label.em_iterations", 1)), int(param(params, "seed", 0)))
         log.info("label %s: read %s%s", task, ds, f" (EM over {policy})" if policy else "")
         report = label_dataset(t, ds, out_file, cfg, recordings, em)
         _write_report(reports / task / ("labels_em.json" if em else "labels.json"), report, out_file)

@@ -37,7 +37,10 @@ def test_the_same_seed_gives_the_same_weights():
 
 def test_save_and_load_give_the_same_policy(tmp_path):
     policy, _ = train(_data(), ["ee", "a", "b"], CLASSES, 2, TrainConfig(iterations=3, batch_steps=40), seed=0)
-    save(policy, TrainConfig(iterations=3), tmp_path / "m")
+    save(policy, TrainConfig(iterations=1), tmp_path / "m")
+    save(policy, TrainConfig(iterations=3), tmp_path / "m")  # a second run replaces the first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m"]
+    assert '"iterations": 3' in (tmp_path / "m" / "config.json").read_text()
     again = load(tmp_path / "m")
     assert again.objects == ["ee", "a", "b"] and list(again.classes) == [0, 1, 1]
     with torch.no_grad():
