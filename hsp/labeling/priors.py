@@ -132,6 +132,11 @@ class PriorScores:
         still[:, -1] = True
         return still
 
+    def candidates(self) -> np.ndarray:
+        """Where π_m lets a way-point be ``(P, H)``: frames where the tool is still relative
+        to the target, both tracked, and the last frame."""
+        return np.isfinite(self._near)
+
     def unary(self, t: int) -> np.ndarray:
         return self._unary[t]
 

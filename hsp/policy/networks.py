@@ -21,6 +21,7 @@ import torch
 from torch import nn
 
 LOG_STD_RANGE = (-5.0, 2.0)
+LOG_SQRT_2PI = 0.9189385332046727
 
 
 def mlp(d_in: int, d_out: int, hidden: int) -> nn.Sequential:
@@ -30,7 +31,7 @@ def mlp(d_in: int, d_out: int, hidden: int) -> nn.Sequential:
 def gaussian_log_prob(mean: torch.Tensor, log_std: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """Diagonal Gaussian log-density, summed over the last axis."""
     z = (x - mean) * torch.exp(-log_std)
-    return (-0.5 * z * z - log_std - 0.9189385332046727).sum(-1)
+    return (-0.5 * z * z - log_std - LOG_SQRT_2PI).sum(-1)
 
 
 @dataclass(frozen=True)

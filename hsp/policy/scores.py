@@ -15,6 +15,7 @@ import torch
 from hsp.labeling.label import EpisodeLabels
 from hsp.labeling.priors import NEG, PriorConfig, PriorScores
 from hsp.policy.features import class_codes, memory_inputs
+from hsp.policy.networks import LOG_SQRT_2PI
 from hsp.policy.train import Policy
 
 
@@ -48,9 +49,9 @@ class PolicyScores:
             mean, log_std = net.pi_m(codes.expand(H, P, -1), current, memory[:, None].expand(H, P, -1),
                                      g[:, None].expand(H, P, -1))
             self._mean, self._inv_std = mean.numpy(), torch.exp(-log_std).numpy()  # (H, P, 7)
-            self._log_norm = (-log_std.sum(-1) - 7 * 0.9189385332046727).numpy()  # (H, P)
+            self._log_norm = (-log_std.sum(-1) - 7 * LOG_SQRT_2PI).numpy()  # (H, P)
             self._candidates = norm("waypoint", torch.from_numpy(rel)).numpy().transpose(1, 0, 2)  # (P, H, 7)
-        self._allowed = np.isfinite(self.prior._near)  # still frames and the last one (P, H)
+        self._allowed = self.prior.candidates()
 
     def unary(self, t: int) -> np.ndarray:
         return self._unary[t]
