@@ -16,9 +16,8 @@ import numpy as np
 import torch
 
 from hsp.labeling.label import label_episode
-from hsp.labeling.priors import PriorConfig, pairs_of
+from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
 from hsp.policy.features import episode_steps
-from hsp.policy.scores import pair_indices
 from hsp.policy.train import TrainConfig, train
 
 from label_speed import random_walk

@@ -13,8 +13,10 @@ from hsp.errors import HspError
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 
-def load_episodes(dataset_dir: Path, task_name: str) -> tuple[list[np.ndarray], list[np.ndarray], dict]:
+def load_episodes(dataset_dir: Path, task_name: str,
+                  objects: list[str] | None = None) -> tuple[list[np.ndarray], list[np.ndarray], dict]:
     """Per episode: world poses ``(T, n, 7)`` and status ``(T, n)``; plus the feature metadata.
+    With ``objects`` (the task's object names), a dataset of other objects is an error.
 
     Columns are read straight from the Arrow table (fast), split at the episode
     boundaries that LeRobot's metadata records.
@@ -28,7 +30,9 @@ def load_episodes(dataset_dir: Path, task_name: str) -> tuple[list[np.ndarray], 
     feats = ds.meta.features
     if ENV_STATE not in feats or STATUS not in feats:
         raise HspError(f"{dataset_dir}: not an hsp pose dataset (features: {sorted(feats)})")
-    objects = [feats[STATE].get("object")] + list(feats[ENV_STATE].get("objects", []))
+    names = [feats[STATE].get("object")] + list(feats[ENV_STATE].get("objects", []))
+    if objects is not None and names != objects:
+        raise HspError(f"{dataset_dir}: dataset objects {names} are not those of task {task_name!r} {objects}")
     table = ds.hf_dataset.data
     state = np.stack(table.column(STATE).to_numpy(zero_copy_only=False))
     env = np.stack(table.column(ENV_STATE).to_numpy(zero_copy_only=False))
@@ -37,4 +41,4 @@ def load_episodes(dataset_dir: Path, task_name: str) -> tuple[list[np.ndarray], 
     starts = ds.meta.episodes["dataset_from_index"]
     ends = ds.meta.episodes["dataset_to_index"]
     return ([poses[s:e] for s, e in zip(starts, ends)], [status[s:e] for s, e in zip(starts, ends)],
-            {"objects": objects, "tasks": sorted(set(ds.meta.tasks.index)), "fps": ds.fps})
+            {"objects": names, "tasks": sorted(set(ds.meta.tasks.index)), "fps": ds.fps})

@@ -62,6 +62,14 @@ def pairs_of(n: int) -> np.ndarray:
     return np.array([(i, j) for i in range(n) for j in range(1, n) if j != i])
 
 
+def pair_indices(pairs: np.ndarray, tool: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Index into ``pairs`` of each (tool, target) ``(H,)``."""
+    n = int(pairs.max()) + 1
+    lookup = np.full((n, n), -1)
+    lookup[pairs[:, 0], pairs[:, 1]] = np.arange(len(pairs))
+    return lookup[tool, target]
+
+
 def relative_poses(world: np.ndarray) -> np.ndarray:
     """p_t[i, j] for all objects: ``(H, n, n, 7)`` from world poses ``(H, n, 7)``."""
     H, n, _ = world.shape

@@ -56,9 +56,7 @@ def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfi
     EM rounds over the trained policy) into ``out_file``; the report scores them against the
     recordings' annotation when ``recordings_dir`` is given."""
     start = time.perf_counter()
-    poses, status, meta = load_episodes(dataset_dir, task.name)
-    if meta["objects"] != task.names:
-        raise HspError(f"{dataset_dir}: dataset objects {meta['objects']} are not those of task {task.name!r} {task.names}")
+    poses, status, _ = load_episodes(dataset_dir, task.name, task.names)
     symmetries = [o.symmetry for o in task.objects]
     report: dict[str, float | int] = {"episodes": len(poses), "frames": int(sum(len(p) for p in poses))}
     if em is None:

@@ -13,18 +13,10 @@ import numpy as np
 import torch
 
 from hsp.labeling.label import EpisodeLabels
-from hsp.labeling.priors import NEG, PriorConfig, PriorScores
+from hsp.labeling.priors import NEG, PriorConfig, PriorScores, pair_indices
 from hsp.policy.features import class_codes, memory_inputs
 from hsp.policy.networks import LOG_SQRT_2PI
 from hsp.policy.train import Policy
-
-
-def pair_indices(pairs: np.ndarray, tool: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Index into ``pairs`` of each (tool, target) ``(H,)``."""
-    n = int(pairs.max()) + 1
-    lookup = np.full((n, n), -1)
-    lookup[pairs[:, 0], pairs[:, 1]] = np.arange(len(pairs))
-    return lookup[tool, target]
 
 
 class PolicyScores:

@@ -16,10 +16,10 @@ from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.labeling.em import Fit, ScoreModel, em_label
 from hsp.labeling.label import EpisodeLabels, canonical_poses
-from hsp.labeling.priors import PriorConfig, pairs_of
+from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
 from hsp.labeling.stage import WAYPOINT_COLUMNS
 from hsp.policy.features import Steps, episode_steps
-from hsp.policy.scores import PolicyScores, pair_indices
+from hsp.policy.scores import PolicyScores
 from hsp.policy.train import Policy, TrainConfig, save, split, train, validate
 from hsp.tasks.registry import Task
 
@@ -72,9 +72,7 @@ def labelled_steps(task: Task, world: list[np.ndarray], labels: list[EpisodeLabe
 def train_task(task: Task, dataset_dir: Path, labels_file: Path, out_dir: Path, cfg: TrainConfig,
                seed: int) -> dict[str, float | int]:
     start = time.perf_counter()
-    poses, _status, meta = load_episodes(dataset_dir, task.name)
-    if meta["objects"] != task.names:
-        raise HspError(f"{dataset_dir}: dataset objects {meta['objects']} are not those of task {task.name!r} {task.names}")
+    poses, _status, _ = load_episodes(dataset_dir, task.name, task.names)
     world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
     labels = read_labels(labels_file, [len(p) for p in poses])
     steps = labelled_steps(task, world, labels)

@@ -40,9 +40,7 @@ def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Pa
     start = time.perf_counter()
     if rrd_every < 1:
         raise HspError(f"--rrd-every {rrd_every}: must be at least 1")
-    poses, status, meta = load_episodes(dataset_dir, task.name)
-    if meta["objects"] != task.names:
-        raise HspError(f"{dataset_dir}: objects {meta['objects']} are not those of task {task.name!r}")
+    poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
     if not 0 <= episode < len(poses):
         raise HspError(f"{dataset_dir}: no episode {episode} (the dataset has 0–{len(poses) - 1})")
     recordings = list_recordings(recordings_dir)

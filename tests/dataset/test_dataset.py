@@ -35,6 +35,8 @@ def test_ground_truth_dataset_opens_with_lerobot_and_matches_recordings(tasks, r
     assert int(item["episode_index"]) == 1 and item["task"] == "stacking-1"
     poses, status, meta = load_episodes(tmp_path / "ds", "stacking-1")
     assert meta["objects"] == tasks["stacking-1"].names
+    with pytest.raises(HspError, match="are not those of task 'stacking-2'"):
+        load_episodes(tmp_path / "ds", "stacking-2", tasks["stacking-2"].names)
     for p, g, s in zip(poses, gts, status):
         np.testing.assert_allclose(p, g.poses, atol=1e-6)  # stored as float32
         assert np.all(s == TrackStatus.OK)

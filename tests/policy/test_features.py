@@ -3,9 +3,8 @@
 import numpy as np
 
 from hsp.labeling.label import label_episode
-from hsp.labeling.priors import PriorConfig, pairs_of
+from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
 from hsp.policy.features import episode_steps, pair_poses
-from hsp.policy.scores import pair_indices
 from tests.labeling.test_em import _episode
 
 
