@@ -9,7 +9,8 @@ import numpy as np
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
 from hsp.geometry.symmetry import canonical_orientations
-from hsp.labeling.priors import PriorConfig, PriorScores
+from hsp.labeling.priors import PriorConfig, PriorScores, pair_indices
+from hsp.labeling.ties import resolve_target_ties
 from hsp.labeling.viterbi import Scores, Transition, viterbi
 
 
@@ -41,7 +42,8 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     with the objects' ``symmetries``, way-points are in their canonical frames.
 
     ``scores`` replaces the priors (EM with trained networks); it must use the pair order
-    of :func:`~hsp.labeling.priors.pairs_of`.
+    of :func:`~hsp.labeling.priors.pairs_of`. Among targets rigid with each other over a
+    sub-task, the one nearest its final way-point is kept (:mod:`~hsp.labeling.ties`).
     """
     H, n = world.shape[:2]
     if H < 2:
@@ -53,5 +55,6 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
         world = canonical_poses(world, symmetries)
     prior = PriorScores(world, ok, cfg)
     path = viterbi(scores or prior, Transition(cfg.gamma, cfg.beta))
-    pair = prior.pairs[path.pair]
-    return EpisodeLabels(pair[:, 0], pair[:, 1], path.k, prior.rel[path.k, path.pair])
+    tool, target = prior.pairs[path.pair].T
+    target = resolve_target_ties(world, ok, tool, target, path.k, cfg.rigid_m, cfg.rigid_deg)
+    return EpisodeLabels(tool, target, path.k, prior.rel[path.k, pair_indices(prior.pairs, tool, target)])

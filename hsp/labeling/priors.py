@@ -55,6 +55,11 @@ class PriorConfig:
     """Per-frame relative translation (m) above which an object counts as moving."""
     motion_sigma_m: float = 0.005
     """σ of π_l around the straight-line step (m per frame)."""
+    rigid_m: float = 0.01
+    """Objects whose relative position stays within this over a sub-task are rigid with
+    each other there: the poses cannot tell which is the target (:mod:`~hsp.labeling.ties`)."""
+    rigid_deg: float = 10.0
+    """... and whose relative orientation stays within this (degrees)."""
 
 
 def pairs_of(n: int) -> np.ndarray:

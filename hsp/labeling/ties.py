@@ -1,0 +1,52 @@
+"""Targets the poses cannot tell apart.
+
+When several objects keep the same relative pose over a sub-task (blocks of a tower, a
+bucket and a canvas on the table), the tool's trajectory is the same up to one constant
+transform in each of their frames, so π_l and β score them alike and only the α term of
+π_m chooses among them: it multiplies the tool's nearness over every way-point of the
+sub-task, so a block that hovers over the pattern nearer the neighbouring tower than the
+block it is then lowered beside is put relative to the tower. The tie is broken by the
+closest approach instead: the rigid candidate the tool comes nearest at any one of the
+sub-task's way-points (the frames it is still at relative to its target) is the target.
+Viterbi's segmentation and tools are kept; only the target among rigid equivalents moves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hsp.geometry.poses import relative, rotation_angle_deg
+from hsp.labeling.metrics import boundaries
+
+
+def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg: float) -> np.ndarray:
+    """Objects that keep their pose relative to object j over frames ``world (T, n, 7)``
+    within ``tol_m`` and ``tol_deg`` wherever both are tracked; j itself included;
+    ``(n,)`` bool. An object never tracked together with j is not rigid with it."""
+    n = world.shape[1]
+    both = ok & ok[:, j : j + 1]  # (T, n)
+    rel = relative(world, np.broadcast_to(world[:, j : j + 1], world.shape))  # (T, n, 7): p[c, j]
+    first = rel[both.argmax(axis=0), np.arange(n)]  # (n, 7): at the first frame both are tracked
+    shift = np.linalg.norm(rel[..., :3] - first[None, :, :3], axis=-1)
+    turn = rotation_angle_deg(rel[..., 3:], first[None, :, 3:])
+    still = (shift <= tol_m) & (turn <= tol_deg)
+    return both.any(axis=0) & np.all(still | ~both, axis=0)
+
+
+def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, target: np.ndarray, k: np.ndarray,
+                        tol_m: float, tol_deg: float) -> np.ndarray:
+    """o* per frame ``(H,)``: in each run of one (tool, target) pair, the object rigid with
+    the labelled target (never the end-effector 0 or the tool) that the tool comes nearest
+    at the run's way-point frames k; the labelled target when it is as near itself."""
+    H = len(tool)
+    out = target.copy()
+    cut = np.r_[0, boundaries(tool, target), H]
+    for a, b in zip(cut[:-1], cut[1:]):
+        i, j, f = tool[a], target[a], np.unique(k[a:b])
+        candidates = rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)
+        candidates[[0, i]] = False
+        candidates[j] = True
+        dist = np.linalg.norm(world[f, :, :3] - world[f, i : i + 1, :3], axis=-1)  # (F, n)
+        near = np.where(ok[f] & candidates, dist, np.inf).min(axis=0)
+        out[a:b] = j if near[j] <= near.min() else int(near.argmin())
+    return out

@@ -1,0 +1,66 @@
+"""Targets rigid with each other: the closest approach at a way-point decides."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hsp.labeling.ties import resolve_target_ties, rigid_with
+
+IDENTITY = [0, 0, 0, 1.0]
+
+
+def _scene(H: int = 20) -> np.ndarray:
+    """0 end-effector, 1 tool (moving along x), 2 a base block, 3 a block on it, 4 a far block."""
+    world = np.tile(np.r_[0.0, 0.0, 0.0, IDENTITY], (H, 5, 1))
+    world[:, 0, :3] = [0.0, 0.0, 0.5]
+    world[:, 1, 0] = np.linspace(-0.2, 0.05, H)
+    world[:, 1, 2] = 0.0
+    world[:, 3, 2] = 0.04
+    world[:, 4, :3] = [0.5, 0.5, 0.0]
+    return world
+
+
+def test_rigid_with_needs_position_and_orientation_kept():
+    world = _scene()
+    ok = np.ones(world.shape[:2], bool)
+    assert list(rigid_with(world, ok, 2, 0.01, 10.0)) == [True, False, True, True, True]  # the still hand too
+    world[:, 3, 3:] = Rotation.from_euler("z", np.linspace(0, 30, len(world))[:, None], degrees=True).as_quat()
+    assert list(rigid_with(world, ok, 2, 0.01, 10.0)) == [True, False, True, False, True]
+    world[:, 4, 0] += np.linspace(0, 0.05, len(world))
+    ok[:, 0] = False  # never tracked with 2
+    assert list(rigid_with(world, ok, 2, 0.01, 10.0)) == [False, False, True, False, False]
+
+
+def test_the_rigid_candidate_nearest_at_a_way_point_becomes_the_target():
+    world = _scene()
+    H = len(world)
+    world[:, 1, 2] = 0.05  # the tool ends beside the upper block, nearer it than the base
+    ok = np.ones((H, 5), bool)
+    tool, target = np.full(H, 1), np.full(H, 4)  # labelled relative to the far block
+    k = np.full(H, H - 1)
+    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    assert np.all(out == 3)
+
+
+def test_a_hover_way_point_does_not_outweigh_the_closest_approach():
+    world = _scene()
+    H = len(world)
+    world[: H // 2, 1, :3] = [0.0, 0.0, 0.2]  # hovers high above the tower (nearer block 3) ...
+    world[H // 2 :, 1, :3] = [0.06, 0.0, 0.0]  # ... then is set down beside the base (nearer 2)
+    ok = np.ones((H, 5), bool)
+    tool, target = np.full(H, 1), np.full(H, 3)
+    k = np.r_[np.full(H // 2, 2), np.full(H - H // 2, H - 1)]
+    assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0) == 2)
+
+
+def test_moving_objects_the_tool_and_the_end_effector_are_never_swapped_in():
+    world = _scene()
+    H = len(world)
+    world[:, 0, :3] = world[:, 1, :3]  # the end-effector sits on the tool: nearest of all
+    world[:, 3, 0] += np.linspace(0, 0.1, H)  # the upper block slides away: not rigid
+    ok = np.ones((H, 5), bool)
+    tool = np.r_[np.full(H // 2, 1), np.full(H - H // 2, 0)]
+    target = np.full(H, 2)
+    k = np.r_[np.full(H // 2, H // 2 - 1), np.full(H - H // 2, H - 1)]
+    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    assert set(out) <= {2, 4} and not np.any(out == 3)
+    assert np.all(out[: H // 2] == 2)  # the base is nearer the tool than the far block
