@@ -58,7 +58,7 @@ class PriorConfig:
     rigid_m: float = 0.01
     """Objects whose relative position stays within this over a sub-task are rigid with
     each other there: the poses cannot tell which is the target (:mod:`~hsp.labeling.ties`)."""
-    rigid_deg: float = 10.0
+    rigid_deg: float = 15.0
     """... and whose relative orientation stays within this (degrees)."""
 
 

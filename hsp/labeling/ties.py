@@ -19,18 +19,23 @@ from hsp.geometry.poses import relative, rotation_angle_deg
 from hsp.labeling.metrics import boundaries
 
 
-def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg: float) -> np.ndarray:
-    """Objects that keep their pose relative to object j over frames ``world (T, n, 7)``
-    within ``tol_m`` and ``tol_deg`` wherever both are tracked; j itself included;
-    ``(n,)`` bool. An object never tracked together with j is not rigid with it."""
+def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg: float,
+               share: float = 0.9) -> np.ndarray:
+    """Objects that keep their pose relative to object j over frames ``world (T, n, 7)``:
+    in ``share`` of the frames where both are tracked, within ``tol_m`` and ``tol_deg`` of
+    a reference frame (the one nearest the median relative position), so that a few
+    frames of tracking glitch do not break a tower apart; j itself included; ``(n,)``
+    bool. An object never tracked together with j is not rigid with it."""
     n = world.shape[1]
     both = ok & ok[:, j : j + 1]  # (T, n)
     rel = relative(world, np.broadcast_to(world[:, j : j + 1], world.shape))  # (T, n, 7): p[c, j]
-    first = rel[both.argmax(axis=0), np.arange(n)]  # (n, 7): at the first frame both are tracked
-    shift = np.linalg.norm(rel[..., :3] - first[None, :, :3], axis=-1)
-    turn = rotation_angle_deg(rel[..., 3:], first[None, :, 3:])
-    still = (shift <= tol_m) & (turn <= tol_deg)
-    return both.any(axis=0) & np.all(still | ~both, axis=0)
+    median = np.stack([np.median(rel[both[:, c], c, :3], axis=0) if both[:, c].any() else np.zeros(3) for c in range(n)])
+    off = np.where(both, np.linalg.norm(rel[..., :3] - median, axis=-1), np.inf)
+    ref = rel[off.argmin(axis=0), np.arange(n)]  # (n, 7)
+    shift = np.linalg.norm(rel[..., :3] - ref[None, :, :3], axis=-1)
+    turn = rotation_angle_deg(rel[..., 3:], ref[None, :, 3:])
+    kept = np.where(both, (shift <= tol_m) & (turn <= tol_deg), False).sum(axis=0)
+    return both.any(axis=0) & (kept >= share * both.sum(axis=0))
 
 
 def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, target: np.ndarray, k: np.ndarray,
