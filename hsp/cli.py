@@ -166,7 +166,7 @@ def parse(
 def label(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
-    out: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet]"),
+    out: Optional[Path] = typer.Option(None, help="labels parquet [data/labels/TASK.parquet; with --policy TASK_em.parquet]"),
     recordings: Optional[Path] = typer.Option(None, help="recordings, to score the labels against the demonstrator's annotation"),
     policy: Optional[Path] = typer.Option(None, help="trained policy directory: EM refinement for up to label.em_iterations "
                                           "rounds (report: labels_em.json)"),
@@ -184,7 +184,7 @@ def label(
         cfg = section(params, "label", PriorConfig, ignore=("em_iterations",))
         t = load_task(task)
         ds = dataset or Path("data/datasets") / task
-        out_file = out or Path("data/labels") / f"{task}.parquet"
+        out_file = out or Path("data/labels") / f"{task}{'_em' if policy else ''}.parquet"
         em = None
         if policy is not None:
             from hsp.policy.stage import PolicyRefinement

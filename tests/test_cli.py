@@ -39,7 +39,7 @@ def test_unknown_task_is_a_one_line_error(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-def test_parse_ground_truth_ablation(tmp_path):
+def test_parse_ground_truth_ablation(tmp_path, monkeypatch):
     """record → parse --poses-from ground-truth → a dataset and a report; the tracker, with no
     images to track, fails and writes nothing."""
     rec, ds, reports = tmp_path / "rec", tmp_path / "ds", tmp_path / "reports"
@@ -77,12 +77,14 @@ def test_parse_ground_truth_ablation(tmp_path):
     trained = json.loads((reports / "painting" / "proposed" / "train.json").read_text())
     assert trained["iterations"] == 3 and trained["frames"] == report["frames"] and {"final_loss", "seconds"} <= set(trained)
     assert sorted(p.name for p in model.iterdir()) == ["config.json", "model.safetensors"]
-    em_labels = tmp_path / "em.parquet"
-    result = runner.invoke(app, ["label", "painting", "--dataset", str(ds), "--out", str(em_labels), "--policy", str(model),
+    monkeypatch.chdir(tmp_path)  # EM labels go beside the priors' labels, never over them
+    result = runner.invoke(app, ["label", "painting", "--dataset", str(ds), "--policy", str(model),
                                  "--reports", str(reports), "--params", str(params)])
     assert result.exit_code == 0, result.output
     em = json.loads((reports / "painting" / "labels_em.json").read_text())
+    em_labels = tmp_path / "data" / "labels" / "painting_em.parquet"
     assert 1 <= em["em_rounds"] <= 2 and len(pd.read_parquet(em_labels)) == report["frames"]
+    assert not (tmp_path / "data" / "labels" / "painting.parquet").exists()
     other = runner.invoke(app, ["label", "stacking-1", "--dataset", str(ds), "--policy", str(model), "--out", str(tmp_path / "y.parquet")])
     assert other.exit_code == 1 and "not those of task 'stacking-1'" in other.output
     short = runner.invoke(app, ["train", "painting", "--dataset", str(ds), "--labels", str(tmp_path / "none.parquet"),
