@@ -16,6 +16,12 @@ def _rot(q_xyzw: np.ndarray) -> Rotation:
     return Rotation.from_quat(np.asarray(q_xyzw, dtype=float).reshape(-1, 4))
 
 
+def _flat(T: np.ndarray) -> np.ndarray:
+    """Poses as a writable ``(N, 7)`` array: scipy's ``Rotation.apply`` rejects read-only
+    buffers (datasets read zero-copy, broadcast views)."""
+    return np.require(np.asarray(T, float).reshape(-1, 7), requirements="W")
+
+
 def normalize_quat(q_xyzw: np.ndarray) -> np.ndarray:
     """Unit quaternions with a non-negative scalar part (canonical sign), shape kept."""
     q = np.asarray(q_xyzw, dtype=float)
@@ -27,7 +33,7 @@ def compose(T_a_b: np.ndarray, T_b_c: np.ndarray) -> np.ndarray:
     """``T_a_c = T_a_b ∘ T_b_c``; poses ``(..., 7)``, broadcast over leading axes."""
     T_a_b, T_b_c = np.broadcast_arrays(np.asarray(T_a_b, float), np.asarray(T_b_c, float))
     shape = T_a_b.shape
-    a, b = T_a_b.reshape(-1, 7), T_b_c.reshape(-1, 7)
+    a, b = _flat(T_a_b), _flat(T_b_c)
     r_ab = _rot(a[:, 3:])
     t = a[:, :3] + r_ab.apply(b[:, :3])
     q = (r_ab * _rot(b[:, 3:])).as_quat()
@@ -38,7 +44,7 @@ def inverse(T_a_b: np.ndarray) -> np.ndarray:
     """``T_b_a`` from ``T_a_b``; poses ``(..., 7)``."""
     T = np.asarray(T_a_b, float)
     shape = T.shape
-    flat = T.reshape(-1, 7)
+    flat = _flat(T)
     r_inv = _rot(flat[:, 3:]).inv()
     t = -r_inv.apply(flat[:, :3])
     return np.concatenate([t, normalize_quat(r_inv.as_quat())], axis=-1).reshape(shape)

@@ -44,6 +44,17 @@ def test_relative_pose_recovers_world_pose():
     assert np.all(rotation_angle_deg(back[:, 3:], Ti[:, 3:]) < 1e-5)
 
 
+def test_read_only_and_broadcast_poses_are_accepted():
+    """Datasets come back read-only (zero-copy) and tie-breaking broadcasts one object's
+    poses; scipy's Rotation.apply rejects both buffers as they are."""
+    rng = np.random.default_rng(3)
+    Ti, Tj = random_poses(rng, 6), random_poses(rng, 1)
+    Ti.setflags(write=False)
+    expected = relative(Ti.copy(), np.repeat(Tj, 6, axis=0))
+    np.testing.assert_allclose(relative(Ti, np.broadcast_to(Tj, Ti.shape)), expected, atol=1e-12)
+    np.testing.assert_allclose(compose(inverse(Ti), Ti)[:, :3], 0, atol=1e-12)
+
+
 def test_q_and_minus_q_are_the_same_rotation():
     q = Rotation.random(random_state=3).as_quat()
     assert rotation_angle_deg(q, -q) == pytest.approx(0.0, abs=1e-5)
