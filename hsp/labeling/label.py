@@ -43,7 +43,7 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
 
     ``scores`` replaces the priors (EM with trained networks); it must use the pair order
     of :func:`~hsp.labeling.priors.pairs_of`. Among targets rigid with each other over a
-    sub-task, the one nearest its final way-point is kept (:mod:`~hsp.labeling.ties`).
+    sub-task, the one the tool comes nearest at a way-point is kept (:mod:`~hsp.labeling.ties`).
     """
     H, n = world.shape[:2]
     if H < 2:

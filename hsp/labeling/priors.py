@@ -56,8 +56,9 @@ class PriorConfig:
     motion_sigma_m: float = 0.005
     """σ of π_l around the straight-line step (m per frame)."""
     rigid_m: float = 0.01
-    """Objects whose relative position stays within this over a sub-task are rigid with
-    each other there: the poses cannot tell which is the target (:mod:`~hsp.labeling.ties`)."""
+    """Objects whose relative position stays within this over a sub-task (in 90 % of the
+    frames) are rigid with each other there: the poses cannot tell which is the target
+    (:mod:`~hsp.labeling.ties`)."""
     rigid_deg: float = 15.0
     """... and whose relative orientation stays within this (degrees)."""
 
