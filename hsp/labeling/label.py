@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
@@ -36,6 +37,26 @@ def canonical_poses(world: np.ndarray, symmetries: list[str]) -> np.ndarray:
     return out
 
 
+def median_headings(world: np.ndarray, window: int) -> np.ndarray:
+    """World poses ``(H, n, 7)`` with every object's orientation but the end-effector's
+    replaced by its running median over ``window`` frames (quaternion components, their
+    signs made continuous first, then renormalised). A tracker's heading glitch of a few
+    frames swings the tool's position in that object's frame by lever arm × angle, which
+    π_l charges as motion (a nut's 21° for five frames, the wrench 30 cm away: 77 nats in
+    one frame); a median keeps sustained turns. The end-effector's orientation is the
+    commanded motion itself and is kept."""
+    if window <= 1 or world.shape[1] < 2:
+        return world
+    q = world[:, 1:, 3:]
+    flip = np.sign(np.sum(q[1:] * q[:-1], axis=-1))
+    flip[flip == 0] = 1.0
+    sign = np.concatenate([np.ones((1, q.shape[1])), np.cumprod(flip, axis=0)])
+    q = median_filter(q * sign[..., None], size=(window, 1, 1), mode="nearest")
+    out = world.copy()
+    out[:, 1:, 3:] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
+
+
 def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, scores: Scores | None = None,
                   symmetries: list[str] | None = None) -> EpisodeLabels:
     """Pseudo-labels of one episode of world poses ``(H, n, 7)`` with status ``(H, n)``;
@@ -51,6 +72,7 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     if n < 2:
         raise HspError(f"{n} object(s): labelling needs the end-effector and at least one other object")
     ok = status != TrackStatus.LOST
+    world = median_headings(world, cfg.heading_median_frames)
     if symmetries is not None:
         world = canonical_poses(world, symmetries)
     prior = PriorScores(world, ok, cfg)

@@ -61,6 +61,10 @@ class PriorConfig:
     (:mod:`~hsp.labeling.ties`)."""
     rigid_deg: float = 15.0
     """... and whose relative orientation stays within this (degrees)."""
+    heading_median_frames: int = 15
+    """Objects' orientations (not the end-effector's) are median-filtered over this many
+    frames before labelling: tracking glitches in a target's heading would read as the
+    tool's motion (:func:`~hsp.labeling.label.median_headings`); 1 turns it off."""
 
 
 def pairs_of(n: int) -> np.ndarray:

@@ -6,7 +6,8 @@ from scipy.spatial.transform import Rotation
 
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
-from hsp.labeling.label import label_episode
+from hsp.geometry import rotation_angle_deg
+from hsp.labeling.label import label_episode, median_headings
 from hsp.labeling.metrics import boundaries, boundary_errors, label_metrics
 from hsp.labeling.priors import PriorConfig, pairs_of, relative_poses, tool_evidence
 from hsp.labeling.stage import canonical_waypoints
@@ -68,6 +69,26 @@ def test_tracking_jitter_is_not_tool_evidence_but_steady_motion_is():
     carried = world.copy()
     carried[:, 1, 1] += 0.003 * np.arange(H)
     assert np.all(tool_evidence(carried, np.ones((H, n), bool), 0.002) == 1)
+
+
+def test_median_headings_drop_a_glitch_keep_a_turn_and_the_end_effector():
+    """A target's heading glitch of 5 frames goes; a sustained turn and the end-effector's
+    own rotation stay; q and −q from frame to frame do not upset the median."""
+    H = 40
+    world = np.tile([0.5, 0.0, 0.02, 0, 0, 0, 1.0], (H, 3, 1))
+    yaw = np.zeros((H, 3))
+    yaw[10:15, 1] = 21.0  # glitch
+    yaw[20:, 2] = 50.0  # a nut turned and left there
+    yaw[:, 0] = np.linspace(0, 90, H)  # the end-effector turning
+    world[..., 3:] = Rotation.from_euler("z", yaw.reshape(-1, 1), degrees=True).as_quat().reshape(H, 3, 4)
+    world[1::2, 1, 3:] *= -1  # the same rotations, alternate signs
+    out = median_headings(world, 15)
+    angle = lambda q, deg: rotation_angle_deg(q, Rotation.from_euler("z", deg, degrees=True).as_quat())
+    assert np.all(angle(out[:, 1, 3:], 0.0) < 1e-6)
+    assert np.all(angle(out[28:, 2, 3:], 50.0) < 1e-6) and np.all(angle(out[:12, 2, 3:], 0.0) < 1e-6)
+    np.testing.assert_array_equal(out[:, 0], world[:, 0])
+    np.testing.assert_array_equal(out[..., :3], world[..., :3])
+    np.testing.assert_array_equal(median_headings(world, 1), world)
 
 
 @pytest.mark.parametrize("name", ["stacking-1", "painting"])
