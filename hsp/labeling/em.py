@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from hsp.errors import HspError
-from hsp.labeling.label import EpisodeLabels, canonical_poses, label_episode
+from hsp.labeling.label import EpisodeLabels, label_episode, prepared_poses
 from hsp.labeling.priors import PriorConfig, pairs_of
 from hsp.labeling.viterbi import Scores
 
@@ -62,11 +62,11 @@ def em_label(episodes: list[tuple[np.ndarray, np.ndarray]], cfg: PriorConfig, fi
              symmetries: list[str] | None = None) -> EmResult:
     """Labels of ``episodes`` (world poses, status): Viterbi over the priors, then up to
     ``iterations`` rounds of fit → Viterbi over the fitted model, stopping when nothing changes.
-    With the objects' ``symmetries``, poses are made canonical first (the model sees them so)."""
+    With the objects' ``symmetries``, poses are prepared first as for :func:`~hsp.labeling.label.label_episode` (the model sees them so)."""
     if iterations < 0:
         raise HspError(f"em_iterations must be ≥ 0, got {iterations}")
     if symmetries is not None:
-        episodes = [(canonical_poses(w, symmetries), s) for w, s in episodes]
+        episodes = [(prepared_poses(w, symmetries, cfg), s) for w, s in episodes]
     labels = [label_episode(w, s, cfg) for w, s in episodes]
     changed: list[float] = []
     for round_ in range(iterations):

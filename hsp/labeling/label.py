@@ -57,10 +57,18 @@ def median_headings(world: np.ndarray, window: int) -> np.ndarray:
     return out
 
 
+def prepared_poses(world: np.ndarray, symmetries: list[str], cfg: PriorConfig) -> np.ndarray:
+    """Tracked world poses ``(H, n, 7)`` as labelling reads them: headings median-filtered
+    (:func:`median_headings`), then symmetric objects' orientations made canonical."""
+    return canonical_poses(median_headings(world, cfg.heading_median_frames), symmetries)
+
+
 def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, scores: Scores | None = None,
                   symmetries: list[str] | None = None) -> EpisodeLabels:
-    """Pseudo-labels of one episode of world poses ``(H, n, 7)`` with status ``(H, n)``;
-    with the objects' ``symmetries``, way-points are in their canonical frames.
+    """Pseudo-labels of one episode of world poses ``(H, n, 7)`` with status ``(H, n)``.
+    With the objects' ``symmetries``, the poses are tracked ones and are prepared first
+    (:func:`prepared_poses`; way-points are then in canonical frames); without, they are
+    used as given.
 
     ``scores`` replaces the priors (EM with trained networks); it must use the pair order
     of :func:`~hsp.labeling.priors.pairs_of`. Among targets rigid with each other over a
@@ -72,9 +80,8 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     if n < 2:
         raise HspError(f"{n} object(s): labelling needs the end-effector and at least one other object")
     ok = status != TrackStatus.LOST
-    world = median_headings(world, cfg.heading_median_frames)
     if symmetries is not None:
-        world = canonical_poses(world, symmetries)
+        world = prepared_poses(world, symmetries, cfg)
     prior = PriorScores(world, ok, cfg)
     path = viterbi(scores or prior, Transition(cfg.gamma, cfg.beta))
     tool, target = prior.pairs[path.pair].T

@@ -15,7 +15,7 @@ from hsp.dataset.features import TrackStatus
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.labeling.em import Fit, ScoreModel, em_label
-from hsp.labeling.label import EpisodeLabels, canonical_poses
+from hsp.labeling.label import EpisodeLabels, canonical_poses, prepared_poses
 from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
 from hsp.labeling.stage import WAYPOINT_COLUMNS
 from hsp.policy.features import Steps, episode_steps
@@ -132,7 +132,7 @@ class PolicyRefinement:
             cfg: PriorConfig) -> tuple[list[EpisodeLabels], list[float]]:
         if self.policy.objects != task.names:
             raise HspError(f"{self.source}: a policy for objects {self.policy.objects}, not those of task {task.name!r} {task.names}")
-        world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
+        world = [prepared_poses(p, [o.symmetry for o in task.objects], cfg) for p in poses]
         fit = em_fit(task, self.policy, cfg, self.train, self.seed, world)
         result = em_label(list(zip(world, status)), cfg, fit, self.iterations)
         return result.labels, result.changed
