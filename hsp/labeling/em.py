@@ -62,7 +62,8 @@ def em_label(episodes: list[tuple[np.ndarray, np.ndarray]], cfg: PriorConfig, fi
              symmetries: list[str] | None = None) -> EmResult:
     """Labels of ``episodes`` (world poses, status): Viterbi over the priors, then up to
     ``iterations`` rounds of fit → Viterbi over the fitted model, stopping when nothing changes.
-    With the objects' ``symmetries``, poses are prepared first as for :func:`~hsp.labeling.label.label_episode` (the model sees them so)."""
+    With the objects' ``symmetries``, poses are prepared first as for
+    :func:`~hsp.labeling.label.label_episode` (the model sees them so)."""
     if iterations < 0:
         raise HspError(f"em_iterations must be ≥ 0, got {iterations}")
     if symmetries is not None:
