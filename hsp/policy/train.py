@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -22,7 +20,7 @@ from rich.progress import track
 from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
-from hsp.fileio import replace_dir
+from hsp.fileio import atomic_path
 from hsp.policy.features import Steps
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob
 from hsp.policy.normalisation import Normalisation
@@ -145,20 +143,14 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
 def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
     """Weights and normalisation (safetensors) and ``config.json``; the directory is
     swapped in whole, so a reader never sees half a model or one from two runs."""
-    out_dir = Path(out_dir)
-    tmp = out_dir.with_name(f".{out_dir.name}.partial-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with atomic_path(Path(out_dir)) as tmp:
+        tmp.mkdir()
         tensors = {f"net.{k}": v.contiguous() for k, v in policy.net.state_dict().items()}
         tensors |= {f"norm.{k}": v for k, v in policy.norm.stats.items()}
         save_file(tensors, tmp / "model.safetensors")
         config = {"train": asdict(cfg), "sizes": asdict(policy.net.sizes), "objects": policy.objects,
                   "classes": policy.classes.tolist(), "n_classes": policy.n_classes}
         (tmp / "config.json").write_text(json.dumps(config, indent=2) + "\n")
-        replace_dir(tmp, out_dir)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def load(model_dir: Path) -> Policy:
