@@ -23,17 +23,19 @@ def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg:
                share: float = 0.9) -> np.ndarray:
     """Objects that keep their pose relative to object j over frames ``world (T, n, 7)``:
     in ``share`` of the frames where both are tracked, within ``tol_m`` and ``tol_deg`` of
-    a reference frame (the one nearest the median relative position), so that a few
-    frames of tracking glitch do not break a tower apart; j itself included; ``(n,)``
-    bool. An object never tracked together with j is not rigid with it."""
+    a reference frame (the one nearest the median separation), so that a few frames of
+    tracking glitch do not break a tower apart; j itself included; ``(n,)`` bool. The
+    separation is measured along world axes, not in j's frame: there, a small nut's
+    heading drifting 8° under the tracker would move a wheel 10 cm away by 14 mm. An object never tracked together with j is not rigid with it."""
     n = world.shape[1]
     both = ok & ok[:, j : j + 1]  # (T, n)
     rel = relative(world, np.broadcast_to(world[:, j : j + 1], world.shape))  # (T, n, 7): p[c, j]
-    median = np.stack([np.median(rel[both[:, c], c, :3], axis=0) if both[:, c].any() else np.zeros(3) for c in range(n)])
-    off = np.where(both, np.linalg.norm(rel[..., :3] - median, axis=-1), np.inf)
-    ref = rel[off.argmin(axis=0), np.arange(n)]  # (n, 7)
-    shift = np.linalg.norm(rel[..., :3] - ref[None, :, :3], axis=-1)
-    turn = rotation_angle_deg(rel[..., 3:], ref[None, :, 3:])
+    sep = world[..., :3] - world[:, j : j + 1, :3]  # (T, n, 3), world axes
+    median = np.stack([np.median(sep[both[:, c], c], axis=0) if both[:, c].any() else np.zeros(3) for c in range(n)])
+    off = np.where(both, np.linalg.norm(sep - median, axis=-1), np.inf)
+    ref = off.argmin(axis=0)  # (n,)
+    shift = np.linalg.norm(sep - sep[ref, np.arange(n)][None], axis=-1)
+    turn = rotation_angle_deg(rel[..., 3:], rel[ref, np.arange(n), 3:][None])
     kept = np.where(both, (shift <= tol_m) & (turn <= tol_deg), False).sum(axis=0)
     return both.any(axis=0) & (kept >= share * both.sum(axis=0))
 

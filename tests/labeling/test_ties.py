@@ -32,6 +32,16 @@ def test_rigid_with_needs_position_and_orientation_kept():
     assert list(rigid_with(world, ok, 2, 0.01, 10.0)) == [False, False, True, False, False]
 
 
+def test_heading_jitter_of_the_reference_does_not_swing_its_neighbours():
+    """A lug nut's tracked heading drifting 8° moves a wheel 10 cm away by 14 mm in the
+    nut's frame; the two still sit in the same place, so they stay rigid."""
+    world = _scene()
+    world[:, 4, :3] = [0.1, 0.0, 0.0]
+    world[:, 2, 3:] = Rotation.from_euler("z", np.r_[np.zeros(10), np.full(10, 8.0)][:, None], degrees=True).as_quat()
+    ok = np.ones(world.shape[:2], bool)
+    assert rigid_with(world, ok, 2, 0.01, 15.0)[4]
+
+
 def test_the_rigid_candidate_nearest_at_a_way_point_becomes_the_target():
     world = _scene()
     H = len(world)
