@@ -11,7 +11,10 @@ indices k ≥ t; ``rel[t, p]`` is p_t[i, j], the tool's pose in the target's fra
   sub-task starts when something moves again, as the demonstrator's annotation has it.
   Before anything moves there is no evidence. The evidence is soft: the evidenced tool
   gets 1 − ε, every other object ε/(n−1). Translation only: a lug nut turning in place is
-  not a tool.
+  not a tool. A target the tool drives (:func:`driven`: it moves or turns in the world
+  while the tool keeps its pose relative to it, a nut turned by the socket) costs a
+  further ε per frame: the tool's motion cannot be expressed in the frame of an object
+  that moves along with it.
 * π_m (:meth:`PriorScores.jump`): the paper's formula is ambiguous about normalisation.
   Read as: keep the previous way-point index with probability β (a transition, see
   :mod:`viterbi`), or jump to a later index k ≥ t with weight (1−β)/(H−t)·exp(−α‖ŵ_k‖),
@@ -37,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hsp.geometry import relative
+from hsp.geometry.poses import rotation_angle_deg
 
 NEG = -np.inf
 
@@ -53,6 +57,8 @@ class PriorConfig:
     """ε: probability mass left for tools other than the motion evidence."""
     moving_m: float = 0.002
     """Per-frame relative translation (m) above which an object counts as moving."""
+    moving_deg: float = 0.5
+    """Per-frame rotation (degrees) above which an object counts as turning."""
     motion_sigma_m: float = 0.005
     """σ of π_l around the straight-line step (m per frame)."""
     rigid_m: float = 0.01
@@ -115,6 +121,32 @@ def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_windo
     return np.where(last_moved >= 0, tool[np.maximum(last_moved, 0)], -1)
 
 
+def driven(world: np.ndarray, ok: np.ndarray, rel: np.ndarray, moving_m: float, moving_deg: float,
+           half_window: int = 2) -> np.ndarray:
+    """Per frame and pair of ``rel (H, P, 7)`` (p_t[i, j], from ``world (H, n, 7)``):
+    whether target j is driven by tool i, i.e. j moves more than ``moving_m`` or turns
+    more than ``moving_deg`` per frame in the world while p[i, j] changes by less than
+    both; each averaged over ``half_window`` frames either side; ``(H, P)`` bool. Only
+    pairs tracked at both ends of the window can be driven."""
+    H = len(world)
+    a = np.clip(np.arange(H) - half_window, 0, H - 1)
+    b = np.clip(np.arange(H) + half_window, 0, H - 1)
+    span = np.maximum(b - a, 1)[:, None]
+
+    def steps(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        move = np.linalg.norm(x[b, ..., :3] - x[a, ..., :3], axis=-1) / span
+        turn = rotation_angle_deg(x[b, ..., 3:], x[a, ..., 3:]) / span
+        return move, turn
+
+    move, turn = steps(world)  # (H, n)
+    rel_move, rel_turn = steps(rel)  # (H, P)
+    i, j = pairs_of(world.shape[1]).T
+    moves = (move[:, j] > moving_m) | (turn[:, j] > moving_deg)
+    held = (rel_move < moving_m) & (rel_turn < moving_deg)
+    tracked = ok[a][:, i] & ok[b][:, i] & ok[a][:, j] & ok[b][:, j]
+    return moves & held & tracked
+
+
 class PriorScores:
     """:class:`~hsp.labeling.viterbi.Scores` from the hand-set priors of Section IV-A, in
     float32: the recursion streams (P, H) arrays every frame, and float64 only doubled the
@@ -134,6 +166,7 @@ class PriorScores:
         miss = np.log(cfg.tool_epsilon / max(n - 1, 1))
         self._unary = np.where(evidence[:, None] == i[None, :], hit, miss)  # (H, P)
         self._unary[evidence < 0] = np.log(1.0 / n)  # nothing has moved yet: no evidence
+        self._unary += np.where(driven(world, ok, self.rel, cfg.moving_m, cfg.moving_deg), np.log(cfg.tool_epsilon), 0.0)
         self._unary = self._unary.astype(np.float32)
         self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2), dtype=np.float32)  # (P, H, 3)
         self._sq = np.sum(self._xyz**2, axis=-1)  # (P, H)

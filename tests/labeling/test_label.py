@@ -134,6 +134,38 @@ def test_a_way_point_is_where_the_tool_stops_not_where_it_passes_nearest():
     assert np.all(lab.target[:30] == 2) and np.allclose(lab.waypoint[:30, :3], [0.0, 0.0, 0.03], atol=1e-9)
 
 
+def _socket_turn(nut_turns: bool) -> np.ndarray:
+    """0 a wrench comes down onto nut 1 (frames 0–19), turns 50° about it (20–39), lifts
+    (40–49); 2 is the wheel 10 cm away. The nut turns with the socket or, as a tracker
+    that cannot see under the socket reports it, stays."""
+    world = np.zeros((50, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 2, :3] = [0.1, 0.0, 0.0]
+    world[:20, 0, 2] = np.linspace(0.1, 0.01, 20)
+    world[20:40, 0, 2] = 0.01
+    world[40:, 0, 2] = np.linspace(0.01, 0.1, 10)
+    yaw = np.r_[np.zeros(20), np.linspace(0.0, 50.0, 20), np.full(10, 50.0)]
+    world[:, 0, 3:] = Rotation.from_euler("z", yaw[:, None], degrees=True).as_quat()
+    if nut_turns:
+        world[:40, 1, 3:] = world[:40, 0, 3:]
+        world[40:, 1, 3:] = world[39, 0, 3:]
+    return world
+
+
+def test_a_target_turning_with_the_tool_is_driven_and_the_turn_goes_to_the_wheel():
+    from hsp.labeling.priors import driven
+
+    ok = np.ones((50, 3), bool)
+    pair = {tuple(p): c for c, p in enumerate(pairs_of(3))}
+    for nut_turns in (True, False):
+        world = _socket_turn(nut_turns)
+        d = driven(world, ok, relative_poses(world)[:, pairs_of(3)[:, 0], pairs_of(3)[:, 1]], 0.002, 0.5)
+        assert d[24:36, pair[0, 1]].all() == nut_turns and not d[:, pair[0, 2]].any()
+        assert not d[:17, pair[0, 1]].any() and not d[43:, pair[0, 1]].any()
+    lab = label_episode(_socket_turn(True), np.zeros((50, 3), int), PriorConfig())
+    assert np.all(lab.tool == 0) and np.all(lab.target[:18] == 1) and np.all(lab.target[22:38] == 2), lab.target
+
+
 def test_lost_frames_are_never_way_points_of_the_lost_object():
     """Documented behaviour: a lost object's frames carry no evidence (no motion term) and
     cannot be way-points of pairs involving it; labelling still covers every frame."""
