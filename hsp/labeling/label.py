@@ -10,7 +10,7 @@ from scipy.ndimage import median_filter
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
 from hsp.geometry.symmetry import canonical_orientations
-from hsp.labeling.priors import PriorConfig, PriorScores, pair_indices
+from hsp.labeling.priors import PriorConfig, PriorScores, continuous_quaternions, pair_indices
 from hsp.labeling.ties import resolve_target_ties
 from hsp.labeling.viterbi import Scores, Transition, viterbi
 
@@ -47,11 +47,7 @@ def median_headings(world: np.ndarray, window: int) -> np.ndarray:
     commanded motion itself and is kept."""
     if window <= 1 or world.shape[1] < 2:
         return world
-    q = world[:, 1:, 3:]
-    flip = np.sign(np.sum(q[1:] * q[:-1], axis=-1))
-    flip[flip == 0] = 1.0
-    sign = np.concatenate([np.ones((1, q.shape[1])), np.cumprod(flip, axis=0)])
-    q = median_filter(q * sign[..., None], size=(window, 1, 1), mode="nearest")
+    q = median_filter(continuous_quaternions(world[:, 1:, 3:]), size=(window, 1, 1), mode="nearest")
     out = world.copy()
     out[:, 1:, 3:] = q / np.linalg.norm(q, axis=-1, keepdims=True)
     return out

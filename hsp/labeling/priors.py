@@ -26,8 +26,12 @@ indices k ≥ t; ``rel[t, p]`` is p_t[i, j], the tool's pose in the target's fra
   one: otherwise every frame of a descent onto a block would be a candidate, each nearer
   the block beside it than the one below.
 * π_l (:meth:`PriorScores.motion`): the observed step of the tool in the target frame,
-  Δ = p_{t+1}[i, j] − p_t[i, j] (translation), is scored as Gaussian (σ = ``motion_sigma_m``)
-  around a straight-line step of the same length toward the way-point, not overshooting it.
+  Δ = p_{t+1}[i, j] − p_t[i, j], is scored as Gaussian (σ = ``motion_sigma_m``) around a
+  straight-line step of the same length toward the way-point, not overshooting it. The
+  paper's straight line is in R³ × SO(3); here poses are points of R⁷, the position and
+  the orientation quaternion (signs made continuous in time) times 2·``rotation_arm_m``,
+  so that a turn by θ counts as the arc a point at that arm sweeps, arm·θ. Without the
+  rotation a socket turning a nut reads as a pause: the turn would get no way-point.
 
 Frames where an object is lost carry no evidence about it: its motion terms are 0 and
 such frames cannot be way-points.
@@ -61,6 +65,9 @@ class PriorConfig:
     """Per-frame rotation (degrees) above which an object counts as turning."""
     motion_sigma_m: float = 0.005
     """σ of π_l around the straight-line step (m per frame)."""
+    rotation_arm_m: float = 0.05
+    """A turn by θ (rad) counts as a step of ``rotation_arm_m``·θ in π_l and in stillness,
+    the arc of a point this far from the frame's origin (about an object's radius)."""
     rigid_m: float = 0.01
     """Objects whose relative position stays within this over a sub-task (in 90 % of the
     frames) are rigid with each other there: the poses cannot tell which is the target
@@ -90,6 +97,23 @@ def relative_poses(world: np.ndarray) -> np.ndarray:
     """p_t[i, j] for all objects: ``(H, n, n, 7)`` from world poses ``(H, n, 7)``."""
     H, n, _ = world.shape
     return relative(world[:, :, None, :].repeat(n, 2), world[:, None, :, :].repeat(n, 1))
+
+
+def continuous_quaternions(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(H, ..., 4)`` over time, each sign-flipped into the hemisphere of the
+    one before (q and −q are one rotation), so that they change smoothly."""
+    flip = np.sign(np.sum(q[1:] * q[:-1], axis=-1))
+    flip[flip == 0] = 1.0
+    sign = np.concatenate([np.ones((1,) + q.shape[1:-1]), np.cumprod(flip, axis=0)])
+    return q * sign[..., None]
+
+
+def pose_points(rel: np.ndarray, arm: float) -> np.ndarray:
+    """Poses ``(H, ..., 7)`` over time as points of R⁷ in which straight lines and step
+    lengths mean something: the position, and the continuous quaternion
+    (:func:`continuous_quaternions`) times 2·``arm`` (the chord between unit quaternions
+    is 2 sin(θ/4), so a small turn θ moves the point by arm·θ)."""
+    return np.concatenate([rel[..., :3], 2.0 * arm * continuous_quaternions(rel[..., 3:])], axis=-1)
 
 
 def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_window: int = 2) -> np.ndarray:
@@ -168,9 +192,10 @@ class PriorScores:
         self._unary[evidence < 0] = np.log(1.0 / n)  # nothing has moved yet: no evidence
         self._unary += np.where(driven(world, ok, self.rel, cfg.moving_m, cfg.moving_deg), np.log(cfg.tool_epsilon), 0.0)
         self._unary = self._unary.astype(np.float32)
-        self._xyz = np.ascontiguousarray(self.rel[..., :3].transpose(1, 0, 2), dtype=np.float32)  # (P, H, 3)
-        self._sq = np.sum(self._xyz**2, axis=-1)  # (P, H)
-        dist = np.sqrt(self._sq)
+        self._v = np.ascontiguousarray(pose_points(self.rel, cfg.rotation_arm_m).transpose(1, 0, 2),
+                                       dtype=np.float32)  # (P, H, 7)
+        self._sq = np.sum(self._v**2, axis=-1)  # (P, H)
+        dist = np.linalg.norm(self.rel[..., :3], axis=-1).T  # nearness: translation only
         self._near = np.where(self.ok.T & self._still(), -cfg.alpha * dist, NEG).astype(np.float32)
 
     def _still(self, half_window: int = 2) -> np.ndarray:
@@ -178,7 +203,7 @@ class PriorScores:
         over ``half_window`` frames either side is under ``moving_m``; the last frame too."""
         a = np.clip(np.arange(self.H) - half_window, 0, self.H - 1)
         b = np.clip(np.arange(self.H) + half_window, 0, self.H - 1)
-        step = np.linalg.norm(self._xyz[:, b] - self._xyz[:, a], axis=-1) / np.maximum(b - a, 1)
+        step = np.linalg.norm(self._v[:, b] - self._v[:, a], axis=-1) / np.maximum(b - a, 1)
         still = step < self.cfg.moving_m
         still[:, -1] = True
         return still
@@ -195,14 +220,15 @@ class PriorScores:
         return self._near[:, t:] - float(np.log(self.H - t))
 
     def motion(self, t: int) -> np.ndarray:
-        """‖δ − m·u/‖u‖‖² expanded so that no (P, H, 3) temporary is built: δ is the step
-        t → t+1, u = w_k − x_t the way to way-point k, m = min(‖δ‖, ‖u‖)."""
+        """‖δ − m·u/‖u‖‖² expanded so that no (P, H, 7) temporary is built: δ is the step
+        t → t+1, u = w_k − x_t the way to way-point k, m = min(‖δ‖, ‖u‖), all in R⁷
+        (:func:`pose_points`)."""
         usable = self.ok[t] & self.ok[t + 1] if t < self.H - 1 else np.zeros(self.P, bool)
         if not usable.any():
             return np.zeros((self.P, self.H - t), np.float32)
-        x = self._xyz[:, t]  # (P, 3)
-        delta = self._xyz[:, t + 1] - x
-        dots = np.matmul(self._xyz[:, t:], np.stack([x, delta], axis=-1))  # (P, H - t, 2)
+        x = self._v[:, t]  # (P, 7)
+        delta = self._v[:, t + 1] - x
+        dots = np.matmul(self._v[:, t:], np.stack([x, delta], axis=-1))  # (P, H - t, 2)
         d2 = self._sq[:, t:] - 2 * dots[..., 0] + np.sum(x * x, axis=1)[:, None]
         dist = np.sqrt(np.maximum(d2, 0.0))
         s2 = np.sum(delta * delta, axis=1)[:, None]

@@ -134,17 +134,18 @@ def test_a_way_point_is_where_the_tool_stops_not_where_it_passes_nearest():
     assert np.all(lab.target[:30] == 2) and np.allclose(lab.waypoint[:30, :3], [0.0, 0.0, 0.03], atol=1e-9)
 
 
-def _socket_turn(nut_turns: bool) -> np.ndarray:
-    """0 a wrench comes down onto nut 1 (frames 0–19), turns 50° about it (20–39), lifts
-    (40–49); 2 is the wheel 10 cm away. The nut turns with the socket or, as a tracker
-    that cannot see under the socket reports it, stays."""
+def _socket_turn(nut_turns: bool, lift: bool = True) -> np.ndarray:
+    """0 a wrench comes down onto nut 1 (frames 0–14), rests (15–19), turns 50° about it
+    (20–29), rests (30–39) and lifts (40–49) or rests on; 2 is the wheel 10 cm away. The nut turns with the socket or,
+    as a tracker that cannot see under the socket reports it, stays."""
     world = np.zeros((50, 3, 7))
     world[..., 6] = 1.0
     world[:, 2, :3] = [0.1, 0.0, 0.0]
-    world[:20, 0, 2] = np.linspace(0.1, 0.01, 20)
-    world[20:40, 0, 2] = 0.01
-    world[40:, 0, 2] = np.linspace(0.01, 0.1, 10)
-    yaw = np.r_[np.zeros(20), np.linspace(0.0, 50.0, 20), np.full(10, 50.0)]
+    world[:15, 0, 2] = np.linspace(0.1, 0.01, 15)
+    world[15:, 0, 2] = 0.01
+    if lift:
+        world[40:, 0, 2] = np.linspace(0.01, 0.1, 10)
+    yaw = np.r_[np.zeros(20), np.linspace(0.0, 50.0, 10), np.full(20, 50.0)]
     world[:, 0, 3:] = Rotation.from_euler("z", yaw[:, None], degrees=True).as_quat()
     if nut_turns:
         world[:40, 1, 3:] = world[:40, 0, 3:]
@@ -160,10 +161,20 @@ def test_a_target_turning_with_the_tool_is_driven_and_the_turn_goes_to_the_wheel
     for nut_turns in (True, False):
         world = _socket_turn(nut_turns)
         d = driven(world, ok, relative_poses(world)[:, pairs_of(3)[:, 0], pairs_of(3)[:, 1]], 0.002, 0.5)
-        assert d[24:36, pair[0, 1]].all() == nut_turns and not d[:, pair[0, 2]].any()
-        assert not d[:17, pair[0, 1]].any() and not d[43:, pair[0, 1]].any()
+        assert d[22:28, pair[0, 1]].all() == nut_turns and not d[:, pair[0, 2]].any()
+        assert not d[:17, pair[0, 1]].any() and not d[33:, pair[0, 1]].any()
     lab = label_episode(_socket_turn(True), np.zeros((50, 3), int), PriorConfig())
-    assert np.all(lab.tool == 0) and np.all(lab.target[:18] == 1) and np.all(lab.target[22:38] == 2), lab.target
+    assert np.all(lab.tool == 0) and np.all(lab.target[:14] == 1) and np.all(lab.target[22:28] == 2), lab.target
+
+
+def test_a_turn_in_place_has_its_own_way_point():
+    """π_l's straight line is in R³ × SO(3): the socket's descent aims at the seated pose,
+    the turn that follows at the turned one (translation alone would read it as a pause)."""
+    lab = label_episode(_socket_turn(False, lift=False), np.zeros((50, 3), int), PriorConfig())
+    assert np.all(lab.target[:40] == 1), lab.target
+    assert np.all((lab.waypoint_index[:14] >= 14) & (lab.waypoint_index[:14] <= 20)), lab.waypoint_index
+    assert np.all(lab.waypoint_index[22:28] >= 29), lab.waypoint_index
+    assert rotation_angle_deg(lab.waypoint[25, 3:], Rotation.from_euler("z", 50, degrees=True).as_quat()) < 1.0
 
 
 def test_lost_frames_are_never_way_points_of_the_lost_object():
