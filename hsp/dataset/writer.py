@@ -8,7 +8,6 @@ and then renamed into place; a failure leaves no dataset behind.
 from __future__ import annotations
 
 import os
-import shutil
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +16,7 @@ import numpy as np
 
 from hsp.dataset.features import ACTION, ENV_STATE, STATE, STATUS, TrackStatus, features
 from hsp.errors import HspError
-from hsp.fileio import replace_dir
+from hsp.fileio import atomic_path
 from hsp.geometry import rotvec_delta
 from hsp.tasks.registry import Task
 
@@ -53,10 +52,8 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     out_dir = Path(out_dir).resolve()
-    tmp = out_dir.with_name(f".{out_dir.name}.partial")
-    shutil.rmtree(tmp, ignore_errors=True)
     n = len(task.objects)
-    try:
+    with atomic_path(out_dir) as tmp:
         ds = LeRobotDataset.create(repo_id(task), fps=fps, features=features(task), root=tmp, use_videos=False, robot_type="hsp")
         frames, count = 0, 0
         for ep in episodes:
@@ -83,7 +80,4 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
         check = LeRobotDataset(repo_id(task), root=tmp)
         if len(check) != frames or check.num_episodes != count:
             raise HspError(f"{tmp}: wrote {count} episodes / {frames} frames but read back {check.num_episodes} / {len(check)}")
-        replace_dir(tmp, out_dir)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return {"episodes": count, "frames": frames}

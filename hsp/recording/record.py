@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -15,7 +14,7 @@ from rich.progress import Progress
 
 from hsp.config import section
 from hsp.errors import HspError
-from hsp.fileio import replace_dir
+from hsp.fileio import atomic_path
 from hsp.recording.writer import CameraRig, write_episode
 from hsp.sim.camera import CameraConfig
 from hsp.sim.demonstration import demonstrate
@@ -74,25 +73,23 @@ def record(task: Task, cfg: RecordConfig, out_dir: Path, force: bool = False) ->
     out_dir = Path(out_dir)
     if out_dir.exists() and not force:
         raise HspError(f"{out_dir}: output directory exists; pass --force to replace it")
-    tmp = out_dir.with_name(f".{out_dir.name}.partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    jobs = [(task.name, task.objects_dir.parent, cfg.seed, e, cfg.fps, tmp, cfg.rig) for e in range(cfg.episodes)]
-    start = time.perf_counter()
-    results = []
-    with Progress() as progress:
-        bar = progress.add_task(f"record {task.name}", total=len(jobs))
-        if cfg.workers == 1:
-            for job in jobs:
-                results.append(_record_one(job))
-                progress.advance(bar)
-        else:
-            with ProcessPoolExecutor(max_workers=cfg.workers) as pool:
-                for r in pool.map(_record_one, jobs):
-                    results.append(r)
+    with atomic_path(out_dir) as tmp:
+        tmp.mkdir(parents=True)
+        jobs = [(task.name, task.objects_dir.parent, cfg.seed, e, cfg.fps, tmp, cfg.rig) for e in range(cfg.episodes)]
+        start = time.perf_counter()
+        results = []
+        with Progress() as progress:
+            bar = progress.add_task(f"record {task.name}", total=len(jobs))
+            if cfg.workers == 1:
+                for job in jobs:
+                    results.append(_record_one(job))
                     progress.advance(bar)
-    seconds = time.perf_counter() - start
-    replace_dir(tmp, out_dir)
+            else:
+                with ProcessPoolExecutor(max_workers=cfg.workers) as pool:
+                    for r in pool.map(_record_one, jobs):
+                        results.append(r)
+                        progress.advance(bar)
+        seconds = time.perf_counter() - start
     frames = sum(f for _, _, f in results)
     failed = [e for e, ok, _ in results if not ok]
     log.info("wrote %d episodes (%d frames) to %s in %.1f s; demonstrator failed on %s", len(results), frames, out_dir, seconds, failed or "none")

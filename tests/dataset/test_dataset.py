@@ -80,6 +80,10 @@ def test_lost_frames_are_marked_not_interpolated(tasks, tmp_path):
     write_dataset(task, [ep], tmp_path / "ds", 15)
     _, status, _ = load_episodes(tmp_path / "ds", "stacking-1")
     assert status[0][3, 2] == TrackStatus.LOST and (status[0] == TrackStatus.LOST).sum() == 1
+    ep.poses[4, 1] = np.inf
+    with pytest.raises(HspError, match="NaN or infinite"):
+        write_dataset(task, [ep], tmp_path / "ds", 15)  # a failed rewrite keeps the dataset
+    assert [p.name for p in tmp_path.iterdir()] == ["ds"] and len(load_episodes(tmp_path / "ds", "stacking-1")[1]) == 1
 
 
 @pytest.mark.parametrize(("T", "n_extra", "match"), [(1, 0, "needs at least 2"), (4, 1, "do not match")])

@@ -67,6 +67,7 @@ def test_interrupted_run_leaves_previous_output_untouched(tasks, tmp_path, monke
         record(task, RecordConfig(episodes=3, seed=1, workers=1), out, force=True)
     assert sorted(p.name for p in out.iterdir()) == ["episode_000000.mcap"]
     assert (out / "episode_000000.mcap").read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["rec"]
 
 
 def test_bad_config_is_rejected():
