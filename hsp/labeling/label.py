@@ -9,8 +9,9 @@ from scipy.ndimage import median_filter
 
 from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
+from hsp.geometry import relative
 from hsp.geometry.symmetry import canonical_orientations
-from hsp.labeling.priors import PriorConfig, PriorScores, continuous_quaternions, pair_indices
+from hsp.labeling.priors import PriorConfig, PriorScores, continuous_quaternions, pairs_of
 from hsp.labeling.ties import resolve_target_ties
 from hsp.labeling.viterbi import Scores, Transition, viterbi
 
@@ -78,8 +79,7 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     ok = status != TrackStatus.LOST
     if symmetries is not None:
         world = prepared_poses(world, symmetries, cfg)
-    prior = PriorScores(world, ok, cfg)
-    path = viterbi(scores or prior, Transition(cfg.gamma, cfg.beta))
-    tool, target = prior.pairs[path.pair].T
+    path = viterbi(scores or PriorScores(world, ok, cfg), Transition(cfg.gamma, cfg.beta))
+    tool, target = pairs_of(n)[path.pair].T
     target = resolve_target_ties(world, ok, tool, target, path.k, cfg.rigid_m, cfg.rigid_deg)
-    return EpisodeLabels(tool, target, path.k, prior.rel[path.k, pair_indices(prior.pairs, tool, target)])
+    return EpisodeLabels(tool, target, path.k, relative(world[path.k, tool], world[path.k, target]))
