@@ -123,7 +123,10 @@ def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_windo
     moves more than ``moving_m`` but the end-effector does; when everything is still, the
     last tool that moved (a pause belongs to the motion it ends), or −1 (no evidence)
     before anything has moved; ``(H,)``. Each change is averaged over ``half_window``
-    frames either side: tracking jitter cancels, motion does not."""
+    frames either side: tracking jitter cancels, motion does not. While the last object
+    that moved is lost, the end-effector's motion is no evidence either: the hand may be
+    carrying it (a brush swung to the canvas faster than the tracker follows), so that
+    object stays the tool."""
     H, n = world.shape[:2]
     x = world[:, :, :3]
     sep = x[:, :, None, :] - x[:, None, :, :]  # (H, n, n, 3)
@@ -140,6 +143,9 @@ def tool_evidence(world: np.ndarray, ok: np.ndarray, moving_m: float, half_windo
     ee_motion = np.where(ee_ok, change[:, 0, :], 0.0).sum(axis=1) / np.maximum(ee_ok.sum(axis=1), 1)
     motion[:, 0] = 0.0
     tool = np.where(motion.max(axis=1) > moving_m, motion.argmax(axis=1), np.where(ee_motion > moving_m, 0, -1))
+    last_object = np.maximum.accumulate(np.where(tool > 0, np.arange(H - 1), -1))
+    unseen = (last_object >= 0) & ~valid[np.arange(H - 1), tool[np.maximum(last_object, 0)]]
+    tool = np.where((tool == 0) & unseen, -1, tool)  # the hand may be carrying it out of sight
     tool = np.append(tool, tool[-1]) if len(tool) else np.zeros(H, int)
     last_moved = np.maximum.accumulate(np.where(tool >= 0, np.arange(H), -1))
     return np.where(last_moved >= 0, tool[np.maximum(last_moved, 0)], -1)

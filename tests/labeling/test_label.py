@@ -57,6 +57,23 @@ def test_a_pause_belongs_to_the_motion_it_ends():
     assert np.all(ev[25:] == 0)
 
 
+def test_a_carried_object_lost_from_view_stays_the_tool():
+    """The hand carries block 1 throughout; the tracker loses the block in frames 10–19.
+    Its motion cannot be measured there, which is no reason to make the hand the tool;
+    once the block is put down and seen, the hand moving alone is."""
+    H, n = 40, 3
+    world = np.tile([0.5, 0.0, 0.02, 0, 0, 0, 1.0], (H, n, 1))
+    world[:, 2, 0] += 0.3
+    world[:30, :2, 1] += 0.01 * np.arange(30)[:, None]
+    world[30:, :2, 1] += 0.29
+    world[30:, 0, 2] += 0.01 * np.arange(1, 11)  # the hand rises alone
+    ok = np.ones((H, n), bool)
+    ok[10:20, 1] = False
+    ev = tool_evidence(world, ok, moving_m=0.002)
+    assert np.all(ev[:29] == 1), ev
+    assert np.all(ev[31:] == 0), ev
+
+
 def test_tracking_jitter_is_not_tool_evidence_but_steady_motion_is():
     """A block jittering ±1.5 mm frame to frame (3 mm steps) is no tool; one carried 3 mm a frame is."""
     H, n = 30, 3
