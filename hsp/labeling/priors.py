@@ -22,9 +22,9 @@ indices k ≥ t; ``rel[t, p]`` is p_t[i, j], the tool's pose in the target's fra
   unnormalised over k, exactly as written, so nearness to the target (α = 100 per metre)
   is what makes a frame a way-point, not the number of candidate frames. A way-point is
   where a motion toward it ends, so only frames where the tool is still relative to the
-  target (it moves less than ``moving_m`` per frame there), or the last frame, can be
-  one: otherwise every frame of a descent onto a block would be a candidate, each nearer
-  the block beside it than the one below.
+  target (it moves less than ``moving_m`` per frame there, a turn counted as in π_l), or
+  the last frame, can be one: otherwise every frame of a descent onto a block would be a
+  candidate, each nearer the block beside it than the one below.
 * π_l (:meth:`PriorScores.motion`): the observed step of the tool in the target frame,
   Δ = p_{t+1}[i, j] − p_t[i, j], is scored as Gaussian (σ = ``motion_sigma_m``) around a
   straight-line step of the same length toward the way-point, not overshooting it. The
@@ -206,7 +206,8 @@ class PriorScores:
 
     def _still(self, half_window: int = 2) -> np.ndarray:
         """Frames where the tool is still relative to the target ``(P, H)``: its mean step
-        over ``half_window`` frames either side is under ``moving_m``; the last frame too."""
+        in R⁷ (:func:`pose_points`) over ``half_window`` frames either side is under
+        ``moving_m``; the last frame too."""
         a = np.clip(np.arange(self.H) - half_window, 0, self.H - 1)
         b = np.clip(np.arange(self.H) + half_window, 0, self.H - 1)
         step = np.linalg.norm(self._v[:, b] - self._v[:, a], axis=-1) / np.maximum(b - a, 1)
