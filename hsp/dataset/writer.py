@@ -54,12 +54,14 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
     out_dir = Path(out_dir).resolve()
     n = len(task.objects)
     with atomic_path(out_dir) as tmp:
-        ds = LeRobotDataset.create(repo_id(task), fps=fps, features=features(task), root=tmp, use_videos=False, robot_type="hsp")
+        ds = LeRobotDataset.create(repo_id(task), fps=fps, features=features(task), root=tmp, use_videos=False,
+                                   robot_type="hsp")
         frames, count = 0, 0
         for ep in episodes:
             T = len(ep.poses)
             if ep.poses.shape != (T, n, 7) or ep.status.shape != (T, n):
-                raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} do not match {n} objects of {task.name!r}")
+                raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} "
+                               f"do not match {n} objects of {task.name!r}")
             if T < 2:
                 raise HspError(f"{ep.source}: {T} frame(s); an episode needs at least 2")
             good = ep.status != TrackStatus.LOST
@@ -79,5 +81,6 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
         ds.finalize()
         check = LeRobotDataset(repo_id(task), root=tmp)
         if len(check) != frames or check.num_episodes != count:
-            raise HspError(f"{tmp}: wrote {count} episodes / {frames} frames but read back {check.num_episodes} / {len(check)}")
+            raise HspError(f"{tmp}: wrote {count} episodes / {frames} frames "
+                           f"but read back {check.num_episodes} / {len(check)}")
     return {"episodes": count, "frames": frames}

@@ -196,7 +196,8 @@ class PriorScores:
         miss = np.log(cfg.tool_epsilon / max(n - 1, 1))
         self._unary = np.where(evidence[:, None] == i[None, :], hit, miss)  # (H, P)
         self._unary[evidence < 0] = np.log(1.0 / n)  # nothing has moved yet: no evidence
-        self._unary += np.where(driven(world, ok, self.rel, cfg.moving_m, cfg.moving_deg), np.log(cfg.tool_epsilon), 0.0)
+        drives = driven(world, ok, self.rel, cfg.moving_m, cfg.moving_deg)
+        self._unary += np.where(drives, np.log(cfg.tool_epsilon), 0.0)  # a target moving with the tool
         self._unary = self._unary.astype(np.float32)
         self._v = np.ascontiguousarray(pose_points(self.rel, cfg.rotation_arm_m).transpose(1, 0, 2),
                                        dtype=np.float32)  # (P, H, 7)

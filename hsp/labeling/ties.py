@@ -26,7 +26,8 @@ def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg:
     a reference frame (the one nearest the median separation), so that a few frames of
     tracking glitch do not break a tower apart; j itself included; ``(n,)`` bool. The
     separation is measured along world axes, not in j's frame: there, a small nut's
-    heading drifting 8° under the tracker would move a wheel 10 cm away by 14 mm. An object never tracked together with j is not rigid with it."""
+    heading drifting 8° under the tracker would move a wheel 10 cm away by 14 mm. An
+    object never tracked together with j is not rigid with it."""
     n = world.shape[1]
     both = ok & ok[:, j : j + 1]  # (T, n)
     rel = relative(world, np.broadcast_to(world[:, j : j + 1], world.shape))  # (T, n, 7): p[c, j]
