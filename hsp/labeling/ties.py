@@ -7,8 +7,11 @@ transform in each of their frames, so π_l and β score them alike and only the 
 sub-task, so a block that hovers over the pattern nearer the neighbouring tower than the
 block it is then lowered beside is put relative to the tower. The tie is broken by the
 closest approach instead: the rigid candidate the tool comes nearest at any one of the
-sub-task's way-points (the frames it is still at relative to its target) is the target.
-Viterbi's segmentation and tools are kept; only the target among rigid equivalents moves.
+sub-task's way-points (the frames it is still at relative to its target) is the target,
+except when the end-effector has just let go of an object it carried: its retreat is then
+relative to that object, as the hand rising from a block just set beside a tower ends
+nearer the tower. Viterbi's segmentation and tools are kept; only the target among rigid
+equivalents moves.
 """
 
 from __future__ import annotations
@@ -45,15 +48,21 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
                         tol_m: float, tol_deg: float) -> np.ndarray:
     """o* per frame ``(H,)``: in each run of one (tool, target) pair, the object rigid with
     the labelled target (never the end-effector 0 or the tool) that the tool comes nearest
-    at the run's way-point frames k; the labelled target when it is as near itself."""
+    at the run's way-point frames k; the labelled target when it is as near itself. A run
+    of the end-effector right after a run of tool x, when x kept its place to the
+    end-effector there (carried, :func:`rigid_with`) and is a candidate now, takes x."""
     H = len(tool)
     out = target.copy()
     cut = np.r_[0, boundaries(tool, target), H]
-    for a, b in zip(cut[:-1], cut[1:]):
+    for before, a, b in zip(np.r_[0, cut[:-2]], cut[:-1], cut[1:]):
         i, j, f = tool[a], target[a], np.unique(k[a:b])
         candidates = rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)
         candidates[[0, i]] = False
         candidates[j] = True
+        released = tool[a - 1] if a > 0 and i == 0 else 0  # x, if the end-effector let go of it
+        if released and candidates[released] and rigid_with(world[before:a], ok[before:a], released, tol_m, tol_deg)[0]:
+            out[a:b] = released
+            continue
         dist = np.linalg.norm(world[f, :, :3] - world[f, i : i + 1, :3], axis=-1)  # (F, n)
         near = np.where(ok[f] & candidates, dist, np.inf).min(axis=0)
         out[a:b] = j if near[j] <= near.min() else int(near.argmin())

@@ -76,3 +76,33 @@ def test_moving_objects_the_tool_and_the_end_effector_are_never_swapped_in():
     out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
     assert set(out) <= {2, 4} and not np.any(out == 3)
     assert np.all(out[: H // 2] == 2)  # the base is nearer the tool than the far block
+
+
+def _release(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The hand (0) carries block 1 beside block 3, lets go, and rises to a pose nearer 3."""
+    world = _scene(H)
+    h = H // 2
+    world[:h, 1, :3] = np.c_[np.linspace(-0.2, 0.05, h), np.zeros(h), np.zeros(h)]
+    world[h:, 1, :3] = [0.05, 0.0, 0.0]
+    world[:h, 0, :3] = world[:h, 1, :3]
+    world[h:, 0, :3] = np.c_[np.full(H - h, 0.05), np.zeros(H - h), np.linspace(0.0, 0.08, H - h)]
+    world[:, 3, :3] = [0.02, 0.0, 0.06]  # block 3 nearer the risen hand (3.6 cm) than block 1 (8 cm)
+    tool = np.r_[np.full(h, 1), np.full(H - h, 0)]
+    target = np.r_[np.full(h, 2), np.full(H - h, 3)]
+    k = np.r_[np.full(h, h - 1), np.full(H - h, H - 1)]
+    return world, tool, target, k
+
+
+def test_the_hand_letting_go_keeps_the_block_it_carried_as_its_target():
+    world, tool, target, k = _release()
+    ok = np.ones(world.shape[:2], bool)
+    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    assert np.all(out[tool == 0] == 1)
+
+
+def test_a_block_that_moved_without_the_hand_was_not_let_go():
+    world, tool, target, k = _release()
+    world[: len(world) // 2, 0, :3] = [0.3, 0.3, 0.3]  # the hand stayed away: a tracking glitch moved 1
+    ok = np.ones(world.shape[:2], bool)
+    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    assert np.all(out[tool == 0] == 3)
