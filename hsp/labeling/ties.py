@@ -7,11 +7,12 @@ transform in each of their frames, so π_l and β score them alike and only the 
 sub-task, so a block that hovers over the pattern nearer the neighbouring tower than the
 block it is then lowered beside is put relative to the tower. The tie is broken by the
 closest approach instead: the rigid candidate the tool comes nearest at any one of the
-sub-task's way-points (the frames it is still at relative to its target) is the target,
-except when the end-effector has just let go of an object it carried: its retreat is then
-relative to that object, as the hand rising from a block just set beside a tower ends
-nearer the tower. Viterbi's segmentation and tools are kept; only the target among rigid
-equivalents moves.
+sub-task's way-points (the frames it is still at relative to its target) is the target.
+Two motions aim at no nearest object and are put relative to the object they belong to:
+the hand's retreat from an object it has just let go of (rising from a block set beside a
+tower, it ends nearer the tower), and a lift, which ends nearer some block on the table
+than the support the carry then goes to. Viterbi's segmentation and tools are kept; only
+the target among rigid equivalents moves.
 """
 
 from __future__ import annotations
@@ -46,24 +47,42 @@ def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg:
 
 def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, target: np.ndarray, k: np.ndarray,
                         tol_m: float, tol_deg: float) -> np.ndarray:
-    """o* per frame ``(H,)``: in each run of one (tool, target) pair, the object rigid with
-    the labelled target (never the end-effector 0 or the tool) that the tool comes nearest
-    at the run's way-point frames k; the labelled target when it is as near itself. A run
-    of the end-effector right after a run of tool x, when x kept its place to the
-    end-effector there (carried, :func:`rigid_with`) and is a candidate now, takes x."""
-    H = len(tool)
+    """o* per frame ``(H,)``, chosen among the objects rigid with the labelled target over
+    each run of one (tool, target) pair (never the end-effector 0 or the tool):
+
+    - a run of the end-effector right after a run of tool x that it carried (x kept its
+      place to it, :func:`rigid_with`) takes x: the hand retreats from what it let go of;
+    - any other run takes the candidate the tool comes nearest at the run's way-point
+      frames k (the labelled target when it is as near itself);
+    - then, from the last run back, a run that only takes the tool away from its target
+      (nearer at the run's first frame than at any way-point: a lift) takes the target of
+      the next run of the same tool when that one is a candidate: it is where the carry
+      begins, not a sub-task aimed at whatever block it ends nearest.
+    """
+    cut = np.r_[0, boundaries(tool, target), len(tool)]
+    runs = list(zip(cut[:-1], cut[1:]))
     out = target.copy()
-    cut = np.r_[0, boundaries(tool, target), H]
-    for before, a, b in zip(np.r_[0, cut[:-2]], cut[:-1], cut[1:]):
+    let_go = np.zeros(len(runs), bool)
+    for r, (a, b) in enumerate(runs):
         i, j, f = tool[a], target[a], np.unique(k[a:b])
         candidates = rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)
         candidates[[0, i]] = False
         candidates[j] = True
-        released = tool[a - 1] if a > 0 and i == 0 else 0  # x, if the end-effector let go of it
-        if released and candidates[released] and rigid_with(world[before:a], ok[before:a], released, tol_m, tol_deg)[0]:
-            out[a:b] = released
+        x = tool[a - 1] if a > 0 and i == 0 else 0
+        before = slice(runs[r - 1][0], a)
+        if x and candidates[x] and rigid_with(world[before], ok[before], x, tol_m, tol_deg)[0]:
+            out[a:b], let_go[r] = x, True
             continue
         dist = np.linalg.norm(world[f, :, :3] - world[f, i : i + 1, :3], axis=-1)  # (F, n)
         near = np.where(ok[f] & candidates, dist, np.inf).min(axis=0)
         out[a:b] = j if near[j] <= near.min() else int(near.argmin())
+    for r in range(len(runs) - 2, -1, -1):
+        a, b = runs[r]
+        i, j, following = tool[a], out[a], out[b]
+        if let_go[r] or tool[b] != i or following == j:
+            continue
+        f = np.r_[a, np.unique(k[a:b])]
+        dist = np.linalg.norm(world[f, i, :3] - world[f, j, :3], axis=-1)
+        if dist[1:].min() > dist[0] and rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)[following]:
+            out[a:b] = following
     return out

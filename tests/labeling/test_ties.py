@@ -106,3 +106,33 @@ def test_a_block_that_moved_without_the_hand_was_not_let_go():
     ok = np.ones(world.shape[:2], bool)
     out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
     assert np.all(out[tool == 0] == 3)
+
+
+def _lift_then_carry(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Tool 1 rises from beside block 4 (run 1, labelled relative to 4, the block nearest
+    the lifted pose), then is carried onto the tower of 2 and 3 (run 2)."""
+    world = _scene(H)
+    h = H // 2
+    world[:, 4, :3] = [-0.3, 0.0, 0.0]
+    world[:h, 1, :3] = np.c_[np.full(h, -0.2), np.zeros(h), np.linspace(0.0, 0.1, h)]
+    world[h:, 1, :3] = np.c_[np.linspace(-0.2, 0.0, H - h), np.zeros(H - h), np.linspace(0.1, 0.08, H - h)]
+    tool = np.full(H, 1)
+    target = np.r_[np.full(h, 4), np.full(H - h, 3)]
+    k = np.r_[np.full(h, h - 1), np.full(H - h, H - 1)]
+    return world, tool, target, k
+
+
+def test_a_lift_away_from_everything_is_the_first_leg_of_the_carry():
+    world, tool, target, k = _lift_then_carry()
+    ok = np.ones(world.shape[:2], bool)
+    assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0) == 3)
+
+
+def test_a_run_that_comes_nearer_its_target_keeps_it():
+    """A dip: the tool comes down by block 4 before it is carried on to the tower."""
+    world, tool, target, k = _lift_then_carry()
+    h = len(world) // 2
+    world[:h, 1, :3] = np.c_[np.linspace(-0.1, -0.25, h), np.zeros(h), np.linspace(0.2, 0.05, h)]
+    ok = np.ones(world.shape[:2], bool)
+    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    assert np.all(out[:h] == 4) and np.all(out[h:] == 3)
