@@ -45,6 +45,19 @@ def rigid_with(world: np.ndarray, ok: np.ndarray, j: int, tol_m: float, tol_deg:
     return both.any(axis=0) & (kept >= share * both.sum(axis=0))
 
 
+def held_positions(world: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Positions ``(T, n, 3)`` with each object's frames without a pose (``ok`` false)
+    given its position at the nearest frame in time where it was tracked (kept where it
+    never was): a block covered by the one just set on it is still there."""
+    T, n = ok.shape
+    t = np.arange(T)[:, None]
+    last = np.maximum.accumulate(np.where(ok, t, -1), axis=0)
+    following = np.minimum.accumulate(np.where(ok, t, T)[::-1], axis=0)[::-1]
+    src = np.where((following < T) & ((last < 0) | (following - t < t - last)), following, last)
+    src = np.where(src < 0, t, src)
+    return world[src, np.arange(n), :3]
+
+
 def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, target: np.ndarray, k: np.ndarray,
                         tol_m: float, tol_deg: float) -> np.ndarray:
     """o* per frame ``(H,)``, chosen among the objects rigid with the labelled target over
@@ -63,6 +76,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     runs = list(zip(cut[:-1], cut[1:]))
     out = target.copy()
     let_go = np.zeros(len(runs), bool)
+    at = held_positions(world, ok)
     for r, (a, b) in enumerate(runs):
         i, j, f = tool[a], target[a], np.unique(k[a:b])
         candidates = rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)
@@ -73,8 +87,8 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         if x and candidates[x] and rigid_with(world[before], ok[before], x, tol_m, tol_deg)[0]:
             out[a:b], let_go[r] = x, True
             continue
-        dist = np.linalg.norm(world[f, :, :3] - world[f, i : i + 1, :3], axis=-1)  # (F, n)
-        near = np.where(ok[f] & candidates, dist, np.inf).min(axis=0)
+        dist = np.linalg.norm(at[f] - at[f, i : i + 1], axis=-1)  # (F, n)
+        near = np.where(candidates, dist, np.inf).min(axis=0)
         out[a:b] = j if near[j] <= near.min() else int(near.argmin())
     for r in range(len(runs) - 2, -1, -1):
         a, b = runs[r]
@@ -82,7 +96,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         if let_go[r] or tool[b] != i or following == j:
             continue
         f = np.r_[a, np.unique(k[a:b])]
-        dist = np.linalg.norm(world[f, i, :3] - world[f, j, :3], axis=-1)
+        dist = np.linalg.norm(at[f, i] - at[f, j], axis=-1)
         if dist[1:].min() > dist[0] and rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)[following]:
             out[a:b] = following
     return out

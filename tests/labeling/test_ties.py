@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hsp.labeling.ties import resolve_target_ties, rigid_with
+from hsp.labeling.ties import held_positions, resolve_target_ties, rigid_with
 
 IDENTITY = [0, 0, 0, 1.0]
 
@@ -51,6 +51,27 @@ def test_the_rigid_candidate_nearest_at_a_way_point_becomes_the_target():
     k = np.full(H, H - 1)
     out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
     assert np.all(out == 3)
+
+
+def test_a_candidate_lost_at_the_way_point_is_still_where_it_was_seen():
+    """The upper block is hidden under the tool set beside it in the last frames."""
+    world = _scene()
+    H = len(world)
+    world[:, 1, 2] = 0.05
+    ok = np.ones((H, 5), bool)
+    ok[-3:, 3] = False
+    world[-3:, 3, :3] = 9.0  # no pose there: must not be read
+    tool, target, k = np.full(H, 1), np.full(H, 4), np.full(H, H - 1)
+    assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0) == 3)
+
+
+def test_held_positions_take_the_nearest_tracked_frame():
+    world = np.zeros((6, 2, 7))
+    world[:, 0, 0] = np.arange(6)
+    world[:, 1, 0] = -1.0
+    ok = np.array([[1, 0], [1, 0], [0, 0], [0, 0], [0, 0], [1, 0]], bool)
+    assert list(held_positions(world, ok)[:, 0, 0]) == [0, 1, 1, 1, 5, 5]
+    assert np.all(held_positions(world, ok)[:, 1, 0] == -1.0)  # never tracked: kept
 
 
 def test_a_hover_way_point_does_not_outweigh_the_closest_approach():
