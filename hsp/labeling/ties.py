@@ -65,8 +65,10 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
 
     - a run of the end-effector right after a run of tool x that it carried (x kept its
       place to it, :func:`rigid_with`) takes x: the hand retreats from what it let go of;
-    - any other run takes the candidate the tool comes nearest at the run's way-point
-      frames k (the labelled target when it is as near itself);
+    - any other run takes the candidate nearest its way-points (the tool at frames k),
+      each candidate where it sat beside the target during the run, since a way-point
+      frame k may come after a block was set next to it (the labelled target when it is
+      as near itself);
     - then, from the last run back, a run that only takes the tool away from its target
       (nearer at the run's first frame than at any way-point: a lift) takes the target of
       the next run of the same tool when that one is a candidate: it is where the carry
@@ -87,7 +89,8 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         if x and candidates[x] and rigid_with(world[before], ok[before], x, tol_m, tol_deg)[0]:
             out[a:b], let_go[r] = x, True
             continue
-        dist = np.linalg.norm(at[f] - at[f, i : i + 1], axis=-1)  # (F, n)
+        beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run
+        dist = np.linalg.norm((at[f, i] - at[f, j])[:, None] - beside, axis=-1)  # (F, n)
         near = np.where(candidates, dist, np.inf).min(axis=0)
         out[a:b] = j if near[j] <= near.min() else int(near.argmin())
     for r in range(len(runs) - 2, -1, -1):

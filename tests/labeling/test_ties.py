@@ -65,6 +65,20 @@ def test_a_candidate_lost_at_the_way_point_is_still_where_it_was_seen():
     assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0) == 3)
 
 
+def test_candidates_are_compared_where_they_were_during_the_run():
+    """Block 1 is set beside the base (run 1) and its way-point is taken at a later frame,
+    by which time block 4 has been carried next to it (run 2): 4 was far during run 1."""
+    world = _scene()
+    H, h = len(world), len(world) // 2
+    world[h:, 1, 0] = 0.05
+    world[:, 3, :3] = [0.5, -0.5, 0.0]
+    world[h:, 4, :3] = np.c_[np.linspace(0.5, 0.05, H - h), np.zeros(H - h), np.linspace(0.0, 0.04, H - h)]
+    ok = np.ones((H, 5), bool)
+    tool, target = np.r_[np.full(h, 1), np.full(H - h, 4)], np.r_[np.full(h, 2), np.full(H - h, 1)]
+    k = np.full(H, H - 1)
+    assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)[:h] == 2)
+
+
 def test_held_positions_take_the_nearest_tracked_frame():
     world = np.zeros((6, 2, 7))
     world[:, 0, 0] = np.arange(6)
