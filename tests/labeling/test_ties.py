@@ -113,6 +113,16 @@ def test_moving_objects_the_tool_and_the_end_effector_are_never_swapped_in():
     assert np.all(out[: H // 2] == 2)  # the base is nearer the tool than the far block
 
 
+def _two_runs(H: int, first: tuple[int, int], second: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """Tool, target and way-point frame k of two runs, (tool, target) = ``first`` over the
+    first H // 2 frames and ``second`` after, each aiming at its own last frame."""
+    h = H // 2
+    tool = np.r_[np.full(h, first[0]), np.full(H - h, second[0])]
+    target = np.r_[np.full(h, first[1]), np.full(H - h, second[1])]
+    k = np.r_[np.full(h, h - 1), np.full(H - h, H - 1)]
+    return tool, target, k
+
+
 def _release(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The hand (0) carries block 1 beside block 3, lets go, and rises to a pose nearer 3."""
     world = _scene(H)
@@ -122,10 +132,7 @@ def _release(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
     world[:h, 0, :3] = world[:h, 1, :3]
     world[h:, 0, :3] = np.c_[np.full(H - h, 0.05), np.zeros(H - h), np.linspace(0.0, 0.08, H - h)]
     world[:, 3, :3] = [0.02, 0.0, 0.06]  # block 3 nearer the risen hand (3.6 cm) than block 1 (8 cm)
-    tool = np.r_[np.full(h, 1), np.full(H - h, 0)]
-    target = np.r_[np.full(h, 2), np.full(H - h, 3)]
-    k = np.r_[np.full(h, h - 1), np.full(H - h, H - 1)]
-    return world, tool, target, k
+    return (world, *_two_runs(H, (1, 2), (0, 3)))
 
 
 def test_the_hand_letting_go_keeps_the_block_it_carried_as_its_target():
@@ -151,10 +158,7 @@ def _lift_then_carry(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     world[:, 4, :3] = [-0.3, 0.0, 0.0]
     world[:h, 1, :3] = np.c_[np.full(h, -0.2), np.zeros(h), np.linspace(0.0, 0.1, h)]
     world[h:, 1, :3] = np.c_[np.linspace(-0.2, 0.0, H - h), np.zeros(H - h), np.linspace(0.1, 0.08, H - h)]
-    tool = np.full(H, 1)
-    target = np.r_[np.full(h, 4), np.full(H - h, 3)]
-    k = np.r_[np.full(h, h - 1), np.full(H - h, H - 1)]
-    return world, tool, target, k
+    return (world, *_two_runs(H, (1, 4), (1, 3)))
 
 
 def test_a_lift_away_from_everything_is_the_first_leg_of_the_carry():
