@@ -63,8 +63,9 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     """o* per frame ``(H,)``, chosen among the objects rigid with the labelled target over
     each run of one (tool, target) pair (never the end-effector 0 or the tool):
 
-    - a run of the end-effector right after a run of tool x that it carried (x kept its
-      place to it, :func:`rigid_with`) takes x: the hand retreats from what it let go of;
+    - a run of the end-effector right after a run of tool x that it carried (x moved by
+      more than ``tol_m`` and kept its place to it, :func:`rigid_with`) takes x: the hand
+      retreats from what it let go of;
     - any other run takes the candidate nearest its way-points (the tool at frames k),
       each candidate where it sat beside the target during the run, since a way-point
       frame k may come after a block was set next to it (the labelled target when it is
@@ -86,7 +87,8 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         candidates[j] = True
         x = tool[a - 1] if a > 0 and i == 0 else 0
         before = slice(runs[r - 1][0], a)
-        if x and candidates[x] and rigid_with(world[before], ok[before], x, tol_m, tol_deg)[0]:
+        moved = x and np.linalg.norm(at[a - 1, x] - at[before.start, x]) > tol_m
+        if moved and candidates[x] and rigid_with(world[before], ok[before], x, tol_m, tol_deg)[0]:
             out[a:b], let_go[r] = x, True
             continue
         beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run

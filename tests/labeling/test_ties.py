@@ -150,6 +150,15 @@ def test_a_block_that_moved_without_the_hand_was_not_let_go():
     assert np.all(out[tool == 0] == 3)
 
 
+def test_a_block_the_hand_only_paused_beside_was_not_let_go():
+    world, tool, target, k = _release()
+    h = len(world) // 2
+    world[:h, 1, :3] = world[:h, 0, :3] = [0.05, 0.0, 0.0]  # both still: kept their places, nothing carried
+    ok = np.ones(world.shape[:2], bool)
+    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    assert np.all(out[tool == 0] == 3)
+
+
 def _lift_then_carry(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Tool 1 rises from beside block 4 (run 1, labelled relative to 4, the block nearest
     the lifted pose), then is carried onto the tower of 2 and 3 (run 2)."""
