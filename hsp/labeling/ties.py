@@ -58,27 +58,42 @@ def held_positions(world: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return world[src, np.arange(n), :3]
 
 
+def carried(world: np.ndarray, ok: np.ndarray, x: int, tol_m: float) -> bool:
+    """Whether the end-effector (0) carried object x over frames ``world (T, n, 7)``: over
+    the frames where both are tracked, x moved by more than ``tol_m`` and its separation
+    from the end-effector changed by at most ``tol_m``, each measured between the medians
+    of the first and the last quarter of those frames (a block in the hand jitters by up
+    to 1 cm under the tracker; a glitch that moves a block while the hand is elsewhere
+    changes the separation)."""
+    both = ok[:, 0] & ok[:, x]
+    if both.sum() < 2:
+        return False
+    pos, sep = world[both, x, :3], world[both, x, :3] - world[both, 0, :3]
+    q = max(1, len(pos) // 4)
+    moved = np.linalg.norm(np.median(pos[-q:], axis=0) - np.median(pos[:q], axis=0))
+    slipped = np.linalg.norm(np.median(sep[-q:], axis=0) - np.median(sep[:q], axis=0))
+    return bool(moved > tol_m >= slipped)
+
+
 def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, target: np.ndarray, k: np.ndarray,
                         tol_m: float, tol_deg: float) -> np.ndarray:
     """o* per frame ``(H,)``, chosen among the objects rigid with the labelled target over
     each run of one (tool, target) pair (never the end-effector 0 or the tool):
 
-    - a run of the end-effector right after a run of tool x that it carried (x moved by
-      more than ``tol_m`` and kept its place to it, :func:`rigid_with`) takes x: the hand
-      retreats from what it let go of;
+    - a run of the end-effector right after a run of tool x that it :func:`carried` takes
+      x: the hand retreats from what it let go of;
     - any other run takes the candidate nearest its way-points (the tool at frames k),
       each candidate where it sat beside the target during the run, since a way-point
       frame k may come after a block was set next to it (the labelled target when it is
       as near itself);
-    - then, from the last run back, a run that only takes the tool away from its target
-      (nearer at the run's first frame than at any way-point: a lift) takes the target of
-      the next run of the same tool when that one is a candidate: it is where the carry
-      begins, not a sub-task aimed at whatever block it ends nearest.
+    - then, from the last run back, a run that only takes an object tool away from its
+      target (nearer at the run's first frame than at any way-point: a lift) takes the
+      target of the next run of the same tool when that one is a candidate: it is where
+      the carry begins, not a sub-task aimed at whatever block it ends nearest.
     """
     cut = np.r_[0, boundaries(tool, target), len(tool)]
     runs = list(zip(cut[:-1], cut[1:]))
     out = target.copy()
-    let_go = np.zeros(len(runs), bool)
     at = held_positions(world, ok)
     for r, (a, b) in enumerate(runs):
         i, j, f = tool[a], target[a], np.unique(k[a:b])
@@ -87,9 +102,8 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         candidates[j] = True
         x = tool[a - 1] if a > 0 and i == 0 else 0
         before = slice(runs[r - 1][0], a)
-        moved = x and np.linalg.norm(at[a - 1, x] - at[before.start, x]) > tol_m
-        if moved and candidates[x] and rigid_with(world[before], ok[before], x, tol_m, tol_deg)[0]:
-            out[a:b], let_go[r] = x, True
+        if x and candidates[x] and carried(world[before], ok[before], x, tol_m):
+            out[a:b] = x
             continue
         beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run
         dist = np.linalg.norm((at[f, i] - at[f, j])[:, None] - beside, axis=-1)  # (F, n)
@@ -98,7 +112,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     for r in range(len(runs) - 2, -1, -1):
         a, b = runs[r]
         i, j, following = tool[a], out[a], out[b]
-        if let_go[r] or tool[b] != i or following == j:
+        if i == 0 or tool[b] != i or following == j:
             continue
         f = np.r_[a, np.unique(k[a:b])]
         dist = np.linalg.norm(at[f, i] - at[f, j], axis=-1)
