@@ -113,6 +113,11 @@ def test_moving_objects_the_tool_and_the_end_effector_are_never_swapped_in():
     assert np.all(out[: H // 2] == 2)  # the base is nearer the tool than the far block
 
 
+def _resolve(world: np.ndarray, tool: np.ndarray, target: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Targets resolved with every object tracked, within 1 cm and 10°."""
+    return resolve_target_ties(world, np.ones(world.shape[:2], bool), tool, target, k, 0.01, 10.0)
+
+
 def _two_runs(H: int, first: tuple[int, int], second: tuple[int, int]) -> tuple[np.ndarray, ...]:
     """Tool, target and way-point frame k of two runs, (tool, target) = ``first`` over the
     first H // 2 frames and ``second`` after, each aiming at its own last frame."""
@@ -137,8 +142,7 @@ def _release(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
 
 def test_the_hand_letting_go_keeps_the_block_it_carried_as_its_target():
     world, tool, target, k = _release()
-    ok = np.ones(world.shape[:2], bool)
-    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    out = _resolve(world, tool, target, k)
     assert np.all(out[tool == 0] == 1)
 
 
@@ -146,16 +150,14 @@ def test_a_block_jittering_in_the_hand_was_carried():
     """Under the hand the tracker puts the block 1.2 cm off in a third of the frames."""
     world, tool, target, k = _release()
     world[: len(world) // 2 : 3, 1, 1] += 0.012
-    ok = np.ones(world.shape[:2], bool)
-    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    out = _resolve(world, tool, target, k)
     assert np.all(out[tool == 0] == 1)
 
 
 def test_a_block_that_moved_without_the_hand_was_not_let_go():
     world, tool, target, k = _release()
     world[: len(world) // 2, 0, :3] = [0.3, 0.3, 0.3]  # the hand stayed away: a tracking glitch moved 1
-    ok = np.ones(world.shape[:2], bool)
-    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    out = _resolve(world, tool, target, k)
     assert np.all(out[tool == 0] == 3)
 
 
@@ -163,8 +165,7 @@ def test_a_block_the_hand_only_paused_beside_was_not_let_go():
     world, tool, target, k = _release()
     h = len(world) // 2
     world[:h, 1, :3] = world[:h, 0, :3] = [0.05, 0.0, 0.0]  # both still: kept their places, nothing carried
-    ok = np.ones(world.shape[:2], bool)
-    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    out = _resolve(world, tool, target, k)
     assert np.all(out[tool == 0] == 3)
 
 
@@ -181,8 +182,7 @@ def _lift_then_carry(H: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
 
 def test_a_lift_away_from_everything_is_the_first_leg_of_the_carry():
     world, tool, target, k = _lift_then_carry()
-    ok = np.ones(world.shape[:2], bool)
-    assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0) == 3)
+    assert np.all(_resolve(world, tool, target, k) == 3)
 
 
 def test_a_run_that_comes_nearer_its_target_keeps_it():
@@ -190,6 +190,5 @@ def test_a_run_that_comes_nearer_its_target_keeps_it():
     world, tool, target, k = _lift_then_carry()
     h = len(world) // 2
     world[:h, 1, :3] = np.c_[np.linspace(-0.1, -0.25, h), np.zeros(h), np.linspace(0.2, 0.05, h)]
-    ok = np.ones(world.shape[:2], bool)
-    out = resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)
+    out = _resolve(world, tool, target, k)
     assert np.all(out[:h] == 4) and np.all(out[h:] == 3)
