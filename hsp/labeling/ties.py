@@ -85,7 +85,10 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     - any other run takes the candidate nearest its way-points (the tool at frames k),
       each candidate where it sat beside the target during the run, since a way-point
       frame k may come after a block was set next to it (the labelled target when it is
-      as near itself);
+      as near itself). After that closest approach, the first way-point nearer another
+      candidate, and nearer it than the way-point before, starts the part of the run
+      relative to that one, and so on: the wrench gone from the last nut to the wheel's
+      centre, a stroke left in the run of the dip (Viterbi's γ outweighed π_m's nearness);
     - then, from the last run back, a run that only takes an object tool away from its
       target (nearer at the run's first frame than at any way-point: a lift) takes the
       target of the next run of the same tool when that one is a candidate: it is where
@@ -107,8 +110,14 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
             continue
         beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run
         dist = np.linalg.norm((at[f, i] - at[f, j])[:, None] - beside, axis=-1)  # (F, n)
-        near = np.where(candidates, dist, np.inf).min(axis=0)
-        out[a:b] = j if near[j] <= near.min() else int(near.argmin())
+        own = np.where(candidates, dist, np.inf)
+        near = own.min(axis=0)
+        out[a:b] = j = j if near[j] <= near.min() else int(near.argmin())
+        for w in range(own[:, j].argmin() + 1, len(f)):  # the way-points after the closest approach
+            c = int(own[w].argmin())
+            if own[w, c] < min(own[w, j], own[w - 1, c]):  # nearer c than j, and coming nearer c
+                j = c
+            out[a:b][k[a:b] == f[w]] = j
     for r in range(len(runs) - 2, -1, -1):
         a, b = runs[r]
         i, j, following = tool[a], out[a], out[b]

@@ -79,6 +79,20 @@ def test_candidates_are_compared_where_they_were_during_the_run():
     assert np.all(resolve_target_ties(world, ok, tool, target, k, 0.01, 10.0)[:h] == 2)
 
 
+def test_a_later_way_point_approached_at_another_candidate_starts_a_part_relative_to_it():
+    """One run: the tool rests by block 4, then by the base 2 (the wrench gone from the last
+    nut to the wheel's centre), then rises away, ending nearer block 3 than the base but
+    farther from 3 than it was: the rise stays with the base."""
+    H = 30
+    world = _scene(H)
+    world[:, 3, :3] = [0.0, 0.12, 0.0]
+    stops = np.array([[0.47, 0.5, 0.0], [0.0, 0.05, 0.0], [0.0, 0.08, 0.2]])
+    world[:, 1, :3] = np.repeat(stops, 10, axis=0)
+    k = np.repeat([9, 19, 29], 10)
+    out = _resolve(world, np.full(H, 1), np.full(H, 4), k)
+    assert list(out[[0, 9, 10, 19, 20, 29]]) == [4, 4, 2, 2, 2, 2]
+
+
 def test_held_positions_take_the_nearest_tracked_frame():
     world = np.zeros((6, 2, 7))
     world[:, 0, 0] = np.arange(6)
