@@ -103,9 +103,8 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         candidates = rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)
         candidates[[0, i]] = False
         candidates[j] = True
-        x = tool[a - 1] if a > 0 and i == 0 else 0
-        before = slice(runs[r - 1][0], a)
-        if x and candidates[x] and carried(world[before], ok[before], x, tol_m):
+        x = tool[a - 1] if r > 0 and i == 0 else 0  # the object the end-effector may have let go of
+        if x and candidates[x] and carried(world[runs[r - 1][0] : a], ok[runs[r - 1][0] : a], x, tol_m):
             out[a:b] = x
             continue
         beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run
