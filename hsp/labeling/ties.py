@@ -8,11 +8,12 @@ sub-task, so a block that hovers over the pattern nearer the neighbouring tower 
 block it is then lowered beside is put relative to the tower. The tie is broken by the
 closest approach instead: the rigid candidate the tool comes nearest at any one of the
 sub-task's way-points (the frames it is still at relative to its target) is the target.
-Two motions aim at no nearest object and are put relative to the object they belong to:
+Three motions aim at no nearest object and are put relative to the object they belong to:
 the hand's retreat from an object it has just let go of (rising from a block set beside a
-tower, it ends nearer the tower), and a lift, which ends nearer some block on the table
-than the support the carry then goes to. Viterbi's segmentation and tools are kept; only
-the target among rigid equivalents moves.
+tower, it ends nearer the tower); a tool's retreat from where it was at work (a brush
+lifted out of the bucket, a wrench rising from a nut), which ends that work; and a lift,
+which ends nearer some block on the table than the support the carry then goes to.
+Viterbi's segmentation and tools are kept; only the target among rigid equivalents moves.
 """
 
 from __future__ import annotations
@@ -82,17 +83,24 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
 
     - a run of the end-effector right after a run of tool x that it :func:`carried` takes
       x: the hand retreats from what it let go of;
-    - any other run takes the candidate nearest its way-points (the tool at frames k),
-      each candidate where it sat beside the target during the run, since a way-point
-      frame k may come after a block was set next to it (the labelled target when it is
-      as near itself). After that closest approach, the first way-point nearer another
-      candidate, and nearer it than the way-point before, starts the part of the run
-      relative to that one, and so on: the wrench gone from the last nut to the wheel's
-      centre, a stroke left in the run of the dip (Viterbi's γ outweighed π_m's nearness);
+    - in a run right after one of the same tool, the leading way-points farther from every
+      candidate than the tool was at the run's first frame (a retreat) take the candidate
+      it was nearest there: the retreat ends the work before, as the demonstrator's
+      annotation has it (the brush's lift with the dip; the wrench's turn and rise with the
+      wheel when the nut, turning with the socket, is no candidate);
+    - any other run, or the rest of it, takes the candidate nearest its way-points (the
+      tool at frames k), each candidate where it sat beside the target during the run,
+      since a way-point frame k may come after a block was set next to it (the labelled
+      target when it is as near itself). After that closest approach, the first way-point
+      nearer another candidate, and nearer it than the way-point before, starts the part
+      of the run relative to that one, and so on: the wrench gone from the last nut to the
+      wheel's centre, a stroke left in the run of the dip (Viterbi's γ outweighed π_m's
+      nearness);
     - then, from the last run back, a run that only takes an object tool away from its
       target (nearer at the run's first frame than at any way-point: a lift) takes the
       target of the next run of the same tool when that one is a candidate: it is where
-      the carry begins, not a sub-task aimed at whatever block it ends nearest.
+      the carry begins, not a sub-task aimed at whatever block it ends nearest. A run after
+      one of the same tool is not a lift: its retreat was settled above.
     """
     cut = np.r_[0, boundaries(tool, target), len(tool)]
     runs = list(zip(cut[:-1], cut[1:]))
@@ -108,10 +116,18 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
             out[a:b] = x
             continue
         beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run
-        dist = np.linalg.norm((at[f, i] - at[f, j])[:, None] - beside, axis=-1)  # (F, n)
-        own = np.where(candidates, dist, np.inf)
+        dist = np.linalg.norm((at[np.r_[a, f], i] - at[np.r_[a, f], j])[:, None] - beside, axis=-1)  # (1 + F, n)
+        start, own = np.split(np.where(candidates, dist, np.inf), [1])
+        back = 0
+        if r > 0 and tool[runs[r - 1][0]] == i:  # the tool was at work before: a retreat from there is its end
+            back = int(np.cumprod(np.all(own[:, candidates] > start[:, candidates], axis=1)).sum())
+            out[a:b][np.isin(k[a:b], f[:back])] = int(start.argmin())
+        if back == len(f):
+            continue
+        f, own = f[back:], own[back:]
         near = own.min(axis=0)
-        out[a:b] = j = j if near[j] <= near.min() else int(near.argmin())
+        j = j if near[j] <= near.min() else int(near.argmin())
+        out[a:b][np.isin(k[a:b], f)] = j
         for w in range(own[:, j].argmin() + 1, len(f)):  # the way-points after the closest approach
             c = int(own[w].argmin())
             if own[w, c] < min(own[w, j], own[w - 1, c]):  # nearer c than j, and coming nearer c
@@ -120,7 +136,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     for r in range(len(runs) - 2, -1, -1):
         a, b = runs[r]
         i, j, following = tool[a], out[a], out[b]
-        if i == 0 or tool[b] != i or following == j:
+        if i == 0 or tool[b] != i or following == j or (r > 0 and tool[runs[r - 1][0]] == i):
             continue
         f = np.r_[a, np.unique(k[a:b])]
         dist = np.linalg.norm(at[f, i] - at[f, j], axis=-1)

@@ -206,3 +206,51 @@ def test_a_run_that_comes_nearer_its_target_keeps_it():
     world[:h, 1, :3] = np.c_[np.linspace(-0.1, -0.25, h), np.zeros(h), np.linspace(0.2, 0.05, h)]
     out = _resolve(world, tool, target, k)
     assert np.all(out[:h] == 4) and np.all(out[h:] == 3)
+
+
+def _retreat(H: int = 30) -> tuple[np.ndarray, ...]:
+    """The end-effector seats on nut 2 (run 1), turns it and rises (way-point at frame 19),
+    then goes above nut 3 (frame 29); Viterbi labelled the turn, the rise and the approach
+    as one run relative to 3. Wheel 1 is 10 cm from nut 2, nut 3 is 20 cm from it."""
+    world = np.tile(np.r_[0.0, 0.0, 0.0, IDENTITY], (H, 4, 1))
+    world[:, 1, :3] = [0.1, 0.0, 0.0]
+    world[:, 3, :3] = [0.2, 0.0, 0.0]
+    world[10:, 2, 3:] = Rotation.from_euler("z", np.linspace(0, 50, H - 10)[:, None], degrees=True).as_quat()
+    world[:10, 0, :3] = np.c_[np.zeros(10), np.zeros(10), np.linspace(0.1, 0.01, 10)]
+    world[10:20, 0, :3] = np.c_[np.zeros(10), np.zeros(10), np.linspace(0.01, 0.1, 10)]
+    world[20:, 0, :3] = np.c_[np.linspace(0.0, 0.2, 10), np.zeros(10), np.full(10, 0.05)]
+    tool, target = np.zeros(H, int), np.r_[np.full(10, 2), np.full(H - 10, 3)]
+    k = np.repeat([9, 19, 29], 10)
+    return world, tool, target, k
+
+
+def test_a_retreat_belongs_to_what_the_tool_was_nearest_when_it_began():
+    """The rise moves away from every candidate: it ends the work at the nut, relative to
+    the wheel (the nut, turning with the socket, is no candidate); the approach is to 3."""
+    world, tool, target, k = _retreat()
+    out = _resolve(world, tool, target, k)
+    assert list(out[[0, 9, 10, 19, 20, 29]]) == [2, 2, 1, 1, 3, 3]
+
+
+def test_a_run_after_another_tool_has_no_retreat():
+    """The same motion right after a block's run is not the end of the end-effector's work."""
+    world, tool, target, k = _retreat()
+    tool[:10] = 1
+    world[:, 1, :3] = world[:, 0, :3] + [0.0, 0.05, 0.0]  # a block beside the hand, never a candidate
+    out = _resolve(world, tool, target, k)
+    assert np.all(out[10:] == 3)
+
+
+def test_a_lift_after_a_dip_of_the_same_tool_belongs_to_the_dip():
+    """Tool 1 comes down by block 4 (the dip), rises (a run of its own, labelled relative to
+    the tower), then is carried to the tower: the rise is the dip's end, not the carry's start."""
+    H = 30
+    world = _scene(H)
+    world[:, 4, :3] = [-0.3, 0.0, 0.0]
+    world[:10, 1, :3] = np.c_[np.full(10, -0.25), np.zeros(10), np.linspace(0.1, 0.02, 10)]
+    world[10:20, 1, :3] = np.c_[np.full(10, -0.25), np.zeros(10), np.linspace(0.02, 0.15, 10)]
+    world[20:, 1, :3] = np.c_[np.linspace(-0.25, 0.0, 10), np.zeros(10), np.full(10, 0.08)]
+    tool, target = np.full(H, 1), np.r_[np.full(10, 4), np.full(10, 3), np.full(10, 3)]
+    k = np.repeat([9, 19, 29], 10)
+    out = _resolve(world, tool, target, k)
+    assert np.all(out[:20] == 4) and np.all(out[20:] == 3)
