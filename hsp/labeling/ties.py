@@ -119,7 +119,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         dist = np.linalg.norm((at[np.r_[a, f], i] - at[np.r_[a, f], j])[:, None] - beside, axis=-1)  # (1 + F, n)
         start, own = np.split(np.where(candidates, dist, np.inf), [1])
         back = 0
-        if r > 0 and tool[runs[r - 1][0]] == i:  # the tool was at work before: a retreat from there is its end
+        if a > 0 and tool[a - 1] == i:  # the tool was at work before: a retreat from there is its end
             back = int(np.cumprod(np.all(own[:, candidates] > start[:, candidates], axis=1)).sum())
             out[a:b][np.isin(k[a:b], f[:back])] = int(start.argmin())
         if back == len(f):
@@ -136,7 +136,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     for r in range(len(runs) - 2, -1, -1):
         a, b = runs[r]
         i, j, following = tool[a], out[a], out[b]
-        if i == 0 or tool[b] != i or following == j or (r > 0 and tool[runs[r - 1][0]] == i):
+        if i == 0 or tool[b] != i or following == j or (a > 0 and tool[a - 1] == i):
             continue
         f = np.r_[a, np.unique(k[a:b])]
         dist = np.linalg.norm(at[f, i] - at[f, j], axis=-1)
