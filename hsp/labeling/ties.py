@@ -104,6 +104,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     """
     cut = np.r_[0, boundaries(tool, target), len(tool)]
     runs = list(zip(cut[:-1], cut[1:]))
+    previous = np.r_[-1, tool[cut[1:-1] - 1]]  # the tool of the run before each run (−1: none)
     out = target.copy()
     at = held_positions(world, ok)
     for r, (a, b) in enumerate(runs):
@@ -111,15 +112,15 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
         candidates = rigid_with(world[a:b], ok[a:b], j, tol_m, tol_deg)
         candidates[[0, i]] = False
         candidates[j] = True
-        x = tool[a - 1] if r > 0 and i == 0 else 0  # the object the end-effector may have let go of
-        if x and candidates[x] and carried(world[runs[r - 1][0] : a], ok[runs[r - 1][0] : a], x, tol_m):
+        x = previous[r] if i == 0 and previous[r] > 0 else 0  # the object the end-effector may have let go of
+        if x and candidates[x] and carried(world[cut[r - 1] : a], ok[cut[r - 1] : a], x, tol_m):
             out[a:b] = x
             continue
         beside = np.median(at[a:b] - at[a:b, j : j + 1], axis=0)  # (n, 3): candidates' place by j in the run
         dist = np.linalg.norm((at[np.r_[a, f], i] - at[np.r_[a, f], j])[:, None] - beside, axis=-1)  # (1 + F, n)
         start, own = np.split(np.where(candidates, dist, np.inf), [1])
         back = 0
-        if a > 0 and tool[a - 1] == i:  # the tool was at work before: a retreat from there is its end
+        if previous[r] == i:  # the tool was at work before: a retreat from there is its end
             back = int(np.cumprod(np.all(own[:, candidates] > start[:, candidates], axis=1)).sum())
             out[a:b][np.isin(k[a:b], f[:back])] = int(start.argmin())
         if back == len(f):
@@ -136,7 +137,7 @@ def resolve_target_ties(world: np.ndarray, ok: np.ndarray, tool: np.ndarray, tar
     for r in range(len(runs) - 2, -1, -1):
         a, b = runs[r]
         i, j, following = tool[a], out[a], out[b]
-        if i == 0 or tool[b] != i or following == j or (a > 0 and tool[a - 1] == i):
+        if i == 0 or tool[b] != i or following == j or previous[r] == i:
             continue
         f = np.r_[a, np.unique(k[a:b])]
         dist = np.linalg.norm(at[f, i] - at[f, j], axis=-1)
