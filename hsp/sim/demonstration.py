@@ -51,11 +51,15 @@ class Demonstration:
 
 @dataclass
 class PlanContext:
-    """What a demonstrator plan may look at: the task, the true poses, its own rng."""
+    """What a demonstrator plan may look at: the task, the poses, its own rng and, for a
+    robot, how close its arm can bring the end-effector to a world pose."""
 
     task: Task
     rng: np.random.Generator
     poses: Callable[[], np.ndarray]
+    reach_error: Callable[[np.ndarray], float] | None = None
+    """Position error (m) of the arm's best IK solution for a world pose of object 0;
+    ``None`` for the floating hand, which reaches every pose."""
 
 
 class _Recorder:
@@ -141,7 +145,7 @@ def demonstrate(task: Task, seed: int, fps: int) -> Demonstration:
     with Scene(task, layout, task.spec.demonstrator.embodiment) as scene:
         for _ in range(SIM_HZ // 4):
             scene.substep(layout[0] if task.spec.demonstrator.embodiment == "hand" else scene.ee.tcp_pose())
-        ctx = PlanContext(task, rng, scene.object_poses)
+        ctx = PlanContext(task, rng, scene.object_poses, getattr(scene.ee, "reach_error", None))
         rec = execute(scene, PLANS[task.spec.kind](ctx), fps, rng)
     poses = np.stack([r[0] for r in rec.rows])
     return Demonstration(

@@ -76,6 +76,13 @@ class KukaArm:
             physicsClientId=self.client,
         )
 
+    def reach_error(self, T_world_tcp: np.ndarray) -> float:
+        """Position error (m) of the flange for the IK solution from the rest posture that
+        puts the tool-centre point at ``T_world_tcp (7,)``: near 0 where the arm reaches."""
+        T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))
+        q = self.ik.solve(T_world_flange, REST)
+        return float(np.linalg.norm(self.ik.flange_pose(q)[:3] - T_world_flange[:3]))
+
     def reset_to(self, T_world_tcp: np.ndarray) -> None:
         """Teleport the arm (and tool) so that the TCP is at ``T_world_tcp``; for layouts."""
         T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, inverse, yaw_of
+
+REACH_TOLERANCE_M = 0.001
+"""A pose counts as reachable by the arm when its IK solution lands this close (m)."""
 
 
 def pose(xyz: np.ndarray, rot: Rotation) -> np.ndarray:
@@ -25,3 +30,17 @@ def nearest_yaw(candidates: np.ndarray, current_yaw: float) -> float:
 
 def hand_yaw(T_world_hand: np.ndarray) -> float:
     return float(yaw_of(T_world_hand[3:]))
+
+
+def reachable_yaw(preferred: float, poses_at: Callable[[float], list[np.ndarray]],
+                  reach_error: Callable[[np.ndarray], float] | None, candidates: int = 16) -> float:
+    """The yaw (rad) nearest ``preferred`` at which the arm reaches every world pose of
+    object 0 that ``poses_at(yaw)`` lists; ``preferred`` itself for the floating hand (or
+    when no candidate is reachable: the motion then shows where the arm falls short)."""
+    if reach_error is None:
+        return preferred
+    offsets = np.arange(candidates) * 2 * np.pi / candidates
+    for yaw in preferred + offsets[np.argsort(np.abs(np.angle(np.exp(1j * offsets))), kind="stable")]:
+        if all(reach_error(T) <= REACH_TOLERANCE_M for T in poses_at(float(yaw))):
+            return float(yaw)
+    return preferred

@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hsp.sim.demonstrators.common import hand_yaw, nearest_yaw, pose
+from hsp.geometry import compose
+from hsp.sim.demonstrators.common import hand_yaw, nearest_yaw, pose, reachable_yaw
 from hsp.sim.demonstrators.steps import Grasp, Move, Step
 
 if TYPE_CHECKING:
@@ -38,12 +39,24 @@ def painting_plan(ctx: "PlanContext") -> Iterator[Step]:
     yield Move(hand, brush, grasp, straight=True, slow=1.3)
     yield Grasp(brush)
 
-    # (brush, bucket): tip down above the paint, dip, lift back out.
+    def hand_at(target: int, *brush_poses: np.ndarray) -> list[np.ndarray]:
+        """World poses of the hand holding the brush at these poses in the target's frame."""
+        T_world_target = ctx.poses()[target]
+        return [compose(compose(T_world_target, b), grasp) for b in brush_poses]
+
+    # (brush, bucket): tip down above the paint, dip, lift back out; a robot turns the
+    # brush about the vertical to the nearest heading its arm reaches.
     heading = rng.uniform(-np.pi, np.pi)
-    R_dip = Rotation.from_euler("z", heading) * Rotation.from_euler("y", np.pi / 2 + rng.normal(0, 0.08))
+    pitch = np.pi / 2 + rng.normal(0, 0.08)
     offset = np.concatenate([rng.uniform(-0.008, 0.008, 2), [rng.uniform(-0.005, 0.005)]])
-    at_paint = paint + offset - R_dip.apply(tip)
-    above = at_paint + [0, 0, 0.13]
+
+    def dip(heading: float) -> tuple[Rotation, np.ndarray, np.ndarray]:
+        R = Rotation.from_euler("z", heading) * Rotation.from_euler("y", pitch)
+        at = paint + offset - R.apply(tip)
+        return R, at, at + [0, 0, 0.13]
+
+    heading = reachable_yaw(heading, lambda h: hand_at(bucket, *(pose(x, dip(h)[0]) for x in dip(h)[1:])), ctx.reach_error)
+    R_dip, at_paint, above = dip(heading)
     yield Move(brush, bucket, pose(above, R_dip))
     yield Move(brush, bucket, pose(at_paint, R_dip), straight=True, slow=1.2)
     yield Move(brush, bucket, pose(above + [0, 0, 0.02], R_dip), straight=True)
@@ -55,8 +68,16 @@ def painting_plan(ctx: "PlanContext") -> Iterator[Step]:
     half = 0.5 * length * np.array([np.cos(direction), np.sin(direction), 0.0])
     room = np.maximum(np.array([hx, hy]) - np.abs(half[:2]) - 0.01, 0.0)
     centre = surface + np.concatenate([rng.uniform(-room, room), [s.plane_height]])
-    R_paint = Rotation.from_euler("z", rng.uniform(-np.pi, np.pi)) * Rotation.from_euler("y", np.pi / 2 - rng.uniform(0.0, 0.3))
-    start, end = centre - half - R_paint.apply(tip), centre + half - R_paint.apply(tip)
+    heading = rng.uniform(-np.pi, np.pi)
+    pitch = np.pi / 2 - rng.uniform(0.0, 0.3)
+
+    def stroke(heading: float) -> tuple[Rotation, np.ndarray, np.ndarray]:
+        R = Rotation.from_euler("z", heading) * Rotation.from_euler("y", pitch)
+        return R, centre - half - R.apply(tip), centre + half - R.apply(tip)
+
+    heading = reachable_yaw(heading, lambda h: hand_at(canvas, *(pose(x + dz, stroke(h)[0]) for x in stroke(h)[1:]
+                                                                 for dz in ([0, 0, 0], [0, 0, 0.08]))), ctx.reach_error)
+    R_paint, start, end = stroke(heading)
     yield Move(brush, canvas, pose(start + [0, 0, 0.06], R_paint))
     yield Move(brush, canvas, pose(start, R_paint), straight=True, slow=1.2)
     yield Move(brush, canvas, pose(end, R_paint), straight=True, slow=1.5)
