@@ -87,7 +87,7 @@ class _Recorder:
                 self.frame()
 
 
-def _duration(start: np.ndarray, goal: np.ndarray, move: Move, task: Task, rng: np.random.Generator) -> float:
+def segment_duration(start: np.ndarray, goal: np.ndarray, move: Move, task: Task, rng: np.random.Generator) -> float:
     d = task.spec.demonstrator
     dist = np.linalg.norm(goal[:3] - start[:3]) + 0.1 * np.radians(rotation_angle_deg(start[3:], goal[3:]))
     return max(d.min_duration, dist / d.speed) * rng.uniform(*d.duration_jitter) * move.slow
@@ -127,7 +127,7 @@ def execute(scene: Scene, steps: Iterator[Step], fps: int, rng: np.random.Genera
             rec.frame()
         rec.label = (step.tool, step.target, step.pose, waypoint_count)
         waypoint_count += 1
-        n_frames = max(1, round(_duration(tcp, goal, step, task, rng) * fps))
+        n_frames = max(1, round(segment_duration(tcp, goal, step, task, rng) * fps))
         n_sub = n_frames * rec.substeps
         path = segment_poses(tcp, goal, np.arange(1, n_sub + 1) / n_sub, _bulge(tcp, goal, step, task, rng))
         pause = round(rng.uniform(*d.pause) * fps) * rec.substeps

@@ -1,0 +1,88 @@
+"""``oracle``: the scripted demonstrator's own plan (tool, target, way-point sequence)
+executed by the Kuka through the same environment and controller as every learned policy.
+
+It proves the environment, the controller, grasping and the checkers before any learning
+is blamed. The plan reads the poses the observer gives (the simulator's, or the tracker's
+with ``--observer camera``); each way-point becomes a minimum-jerk segment of the
+demonstrator's duration, followed by its pause, then by up to ``SETTLE_S`` of holding the
+goal until the tool is there (a robot's lag is not a human's).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+
+from hsp.geometry import compose, inverse, relative
+from hsp.sim.demonstration import PlanContext, segment_duration
+from hsp.sim.demonstrators import PLANS
+from hsp.sim.demonstrators.steps import Grasp, Move, Release
+from hsp.sim.motion import segment_poses
+from hsp.tasks.registry import Task
+
+SETTLE_S = 1.0
+"""Longest wait at a way-point for the tool to arrive (s)."""
+ARRIVED_M = 0.002
+"""The tool has arrived when its origin is this close to the way-point (m)."""
+
+
+class Oracle:
+    """Stateful: ``reset(poses, seed)`` at the start of an episode, then ``act(poses)``
+    once per control step with the observed world poses ``(n, 7)``; returns the action
+    ``(8,)`` of :class:`~hsp.evaluation.env.HspEnv`."""
+
+    def __init__(self, task: Task, fps: int, reach_error: Callable[[np.ndarray], float] | None = None) -> None:
+        self.task, self.fps, self.reach_error = task, fps, reach_error
+
+    def reset(self, poses: np.ndarray, seed: int) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.poses = poses
+        self.plan = PLANS[self.task.spec.kind](PlanContext(self.task, self.rng, lambda: self.poses, self.reach_error))
+        self.path: deque[np.ndarray] = deque()
+        self.command = poses[0].copy()
+        self.grip = 0
+        self.move: Move | None = None
+        self.waited = 0
+
+    def act(self, poses: np.ndarray) -> np.ndarray:
+        self.poses = poses
+        while not self.path and not self._waiting():
+            step = next(self.plan, None)
+            if step is None:
+                break
+            if isinstance(step, Grasp):
+                self.grip = step.obj
+            elif isinstance(step, Release):
+                self.grip = 0
+            else:
+                self._plan_segment(step)
+        if self.path:
+            self.command = self.path.popleft()
+        return np.concatenate([self.command, [self.grip]])
+
+    def _tcp_goal(self, move: Move) -> np.ndarray:
+        """The tool-centre point's world pose that puts the tool at ``move.pose`` in the target's frame."""
+        goal_tool = compose(self.poses[move.target], move.pose)
+        if move.tool == 0:
+            return goal_tool
+        return compose(goal_tool, inverse(relative(self.poses[move.tool], self.poses[0])))
+
+    def _plan_segment(self, move: Move) -> None:
+        goal = self._tcp_goal(move)
+        n = max(1, round(segment_duration(self.command, goal, move, self.task, self.rng) * self.fps))
+        pause = round(self.rng.uniform(*self.task.spec.demonstrator.pause) * self.fps)
+        self.path.extend(segment_poses(self.command, goal, np.arange(1, n + 1) / n, np.zeros(3)))
+        self.path.extend([goal] * pause)
+        self.move, self.waited = move, 0
+
+    def _waiting(self) -> bool:
+        """Hold the last way-point until the tool is there, for at most ``SETTLE_S``."""
+        if self.move is None or self.waited >= SETTLE_S * self.fps:
+            return False
+        at = relative(self.poses[self.move.tool], self.poses[self.move.target])
+        if np.linalg.norm(at[:3] - self.move.pose[:3]) <= ARRIVED_M:
+            return False
+        self.waited += 1
+        return True
