@@ -233,10 +233,42 @@ def train(
         _fail(e)
 
 
-@app.command(name="eval", context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def evaluate(task: str = typer.Argument(...)) -> None:
-    """Evaluate a policy on the simulated Kuka (not available yet)."""
-    _not_available("eval", 8)
+@app.command(name="eval")
+def evaluate(
+    task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
+    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised"),
+    observer: str = typer.Option("sim", help="sim (the simulator's poses) | camera (rendered RGB-D, tracked online)"),
+    episodes: Optional[int] = typer.Option(None, help="episodes per run [params: eval.episodes]"),
+    runs: Optional[int] = typer.Option(None, help="runs, each on its own held-out layouts [params: eval.runs]"),
+    workers: Optional[int] = typer.Option(None, help="episodes in parallel processes [params: eval.workers]"),
+    videos: Optional[int] = typer.Option(None, help="episodes of each run saved as MP4 [params: eval.videos]"),
+    model: Optional[Path] = typer.Option(None, help="model directory [data/models/TASK/METHOD]"),
+    out: Optional[Path] = typer.Option(None, help="report directory [reports/TASK/METHOD]"),
+    params_file: Optional[Path] = PARAMS_OPTION,
+) -> None:
+    """Run a method closed loop on the simulated Kuka over held-out layouts and score it
+    with the paper's success criteria (eval.json, episodes.jsonl, videos/)."""
+    from hsp.evaluation.env import EnvConfig
+    from hsp.evaluation.rollout import EvalConfig
+    from hsp.evaluation.rollout import evaluate as run_evaluation
+    from hsp.tasks.registry import load_task
+
+    try:
+        params = load_params(params_file)
+        t = load_task(task)
+        pick = lambda given, key, default: given if given is not None else param(params, key, default)  # noqa: E731
+        cfg = EvalConfig(
+            episodes=int(pick(episodes, "eval.episodes", 50)), runs=int(pick(runs, "eval.runs", 5)),
+            seed=int(param(params, "seed", 0)), workers=int(pick(workers, "eval.workers", 2)),
+            videos=int(pick(videos, "eval.videos", 1)),
+            recorded_episodes=int(param(params, f"record.episodes.{task}", 0)),
+            env=EnvConfig(fps=int(param(params, "record.fps", 15)), max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
+                          grasp_reach_m=float(param(params, "eval.grasp_reach_m", 0.01))),
+        )
+        model_dir = None if method == "oracle" else (model or Path("data/models") / task / method)
+        run_evaluation(t, method, observer, model_dir, cfg, out or Path("reports") / task / method)
+    except HspError as e:
+        _fail(e)
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
