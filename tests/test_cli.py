@@ -94,7 +94,7 @@ def test_parse_ground_truth_ablation(tmp_path, monkeypatch):
     assert baseline.exit_code == 1 and "only 'proposed'" in baseline.output
 
 
-@pytest.mark.parametrize("stage", ["eval"])
+@pytest.mark.parametrize("stage", ["report"])
 def test_unfinished_stages_say_so(stage):
     result = runner.invoke(app, [stage, "painting"])
     assert result.exit_code == 1

@@ -18,7 +18,7 @@ import numpy as np
 import pybullet as p
 
 from hsp.errors import HspError
-from hsp.geometry import normalize_quat, slerp, transform_points, inverse
+from hsp.geometry import inverse, normalize_quat, rotation_angle_deg, slerp, transform_points
 from hsp.geometry.mesh import obj_vertices
 from hsp.sim.scene import SIM_HZ, Scene
 from hsp.tasks.layout import sample_layout
@@ -38,6 +38,11 @@ class EnvConfig:
     grasp_reach_m: float = 0.01
     """The gripper closes on an object when the tool-centre point is within this of the
     object's bounding box (m)."""
+    max_speed_m_s: float = 1.0
+    """The controller moves the tool-centre point at most this fast (m/s) toward a command
+    (twice the demonstrators' peak speed); farther commands are approached over several steps."""
+    max_turn_deg_s: float = 180.0
+    """... and turns it at most this fast (degrees/s)."""
 
     def __post_init__(self) -> None:
         if self.fps < 1 or SIM_HZ % self.fps:
@@ -46,6 +51,8 @@ class EnvConfig:
             raise HspError(f"eval.max_steps = {self.max_steps}: must be at least 1")
         if self.grasp_reach_m < 0:
             raise HspError(f"eval.grasp_reach_m = {self.grasp_reach_m}: must be ≥ 0")
+        if self.max_speed_m_s <= 0 or self.max_turn_deg_s <= 0:
+            raise HspError(f"eval.max_speed_m_s = {self.max_speed_m_s}, eval.max_turn_deg_s = {self.max_turn_deg_s}: must be > 0")
 
 
 def observation(poses: np.ndarray) -> dict[str, np.ndarray]:
@@ -101,7 +108,7 @@ class HspEnv(gym.Env):
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (8,) or not np.all(np.isfinite(action)):
             raise HspError(f"action must be 8 finite numbers (pose, object to hold), got {action!r}")
-        goal = np.concatenate([action[:3], normalize_quat(action[3:7])])
+        goal = self._limited(np.concatenate([action[:3], normalize_quat(action[3:7])]))
         self._grip(int(round(action[7])))
         substeps = SIM_HZ // self.config.fps
         s = np.arange(1, substeps + 1) / substeps
@@ -145,6 +152,18 @@ class HspEnv(gym.Env):
         local = transform_points(inverse(poses[i]), poses[0, :3])
         lo, hi = self._boxes[i]
         return bool(np.linalg.norm(np.maximum(lo - local, 0) + np.maximum(local - hi, 0)) <= self.config.grasp_reach_m)
+
+    def _limited(self, goal: np.ndarray) -> np.ndarray:
+        """``goal (7,)`` moved back toward the last command to respect the speed limits."""
+        cfg, last = self.config, self._command
+        move = goal[:3] - last[:3]
+        dist = float(np.linalg.norm(move))
+        max_move = cfg.max_speed_m_s / cfg.fps
+        pos = last[:3] + move * min(1.0, max_move / dist) if dist > 0 else goal[:3]
+        turn = float(rotation_angle_deg(last[3:], goal[3:]))
+        max_turn = cfg.max_turn_deg_s / cfg.fps
+        quat = slerp(last[3:], goal[3:], np.array([max_turn / turn]))[0] if turn > max_turn else goal[3:]
+        return np.concatenate([pos, quat])
 
     def _grip(self, obj: int) -> None:
         n = len(self.task.objects)

@@ -54,7 +54,7 @@ class EvalConfig:
                 raise HspError(f"eval.{key} = {getattr(self, key)}: must be at least 1")
 
 
-def test_seeds(seed: int, runs: int, episodes: int, recorded_episodes: int) -> np.ndarray:
+def held_out_seeds(seed: int, runs: int, episodes: int, recorded_episodes: int) -> np.ndarray:
     """Layout seeds ``(runs, episodes)`` disjoint from the recordings' and from each other."""
     used = {episode_seed(seed, e) for e in range(recorded_episodes)}
     out = np.zeros((runs, episodes), np.int64)
@@ -143,7 +143,7 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
 
         HierarchyRunner(load(model_dir), task, str(model_dir))  # a wrong or old model fails here, before any episode
     suffix = "" if observer == "sim" else f"_{observer}"
-    seeds = test_seeds(cfg.seed, cfg.runs, cfg.episodes, cfg.recorded_episodes)
+    seeds = held_out_seeds(cfg.seed, cfg.runs, cfg.episodes, cfg.recorded_episodes)
     out_dir = Path(out_dir)
     start = time.perf_counter()
     with atomic_path(out_dir / f"videos{suffix}") as videos:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from rich.progress import track
+from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
@@ -154,14 +155,18 @@ def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
 
 
 def load(model_dir: Path) -> Policy:
-    """A policy written by :func:`save`; a clear error when the directory is not one."""
+    """A policy written by :func:`save`; a one-line error naming the directory when it is
+    not one, is damaged or was written in another layout."""
     model_dir = Path(model_dir)
     if not (model_dir / "config.json").is_file() or not (model_dir / "model.safetensors").is_file():
         raise HspError(f"{model_dir}: not a trained policy (needs config.json and model.safetensors; run `hsp train`)")
-    config = json.loads((model_dir / "config.json").read_text())
-    tensors = load_file(model_dir / "model.safetensors")
-    net = Hierarchy(Sizes(**config["sizes"]))
-    net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
-    norm = Normalisation({k[5:]: v for k, v in tensors.items() if k.startswith("norm.")})
-    return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"])
-
+    try:
+        config = json.loads((model_dir / "config.json").read_text())
+        tensors = load_file(model_dir / "model.safetensors")
+        net = Hierarchy(Sizes(**config["sizes"]))
+        net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
+        norm = Normalisation({k[5:]: v for k, v in tensors.items() if k.startswith("norm.")})
+        return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"])
+    except (SafetensorError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise HspError(f"{model_dir}: not a trained policy of this hsp version (retrain with `hsp train`): {first}") from None

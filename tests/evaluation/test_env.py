@@ -1,0 +1,88 @@
+"""The environments: registered, laid out as the dataset, graspping within reach only,
+and checkers that say no to a wrong policy."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import hsp.evaluation  # noqa: F401  (registers hsp/<Task>-v0)
+from hsp.dataset.features import ENV_STATE, STATE, features
+from hsp.errors import HspError
+from hsp.evaluation import env_id
+from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
+from hsp.evaluation.oracle import Oracle
+from hsp.evaluation.rollout import run_episode
+from tests.conftest import TASKS
+
+
+@pytest.mark.parametrize("name", TASKS)
+def test_a_few_steps_hold_still_and_observe_as_the_dataset(tasks, name):
+    """Holding the pose for a few steps: observations have the dataset's layout and equal
+    the simulator's poses in task order; nothing is achieved."""
+    env = gym.make(env_id(name), max_steps=5)
+    obs, info = env.reset(seed=3)
+    feats = features(tasks[name])
+    assert obs["agent_pos"].shape == feats[STATE]["shape"]
+    assert obs["environment_state"].shape == feats[ENV_STATE]["shape"]
+    assert obs["agent_pos"].dtype == np.float32
+    hold = np.concatenate([obs["agent_pos"], [0.0]])
+    steps = 0
+    while True:
+        obs, reward, terminated, truncated, info = env.step(hold)
+        steps += 1
+        if terminated or truncated:
+            break
+    inner = env.unwrapped
+    np.testing.assert_allclose(world_poses(obs), inner.scene.object_poses(), atol=1e-6)
+    assert steps == 5 and truncated and not terminated and reward == 0.0
+    assert info["is_success"] is False and not any(info["progress"].values())
+    # the tool-centre point stayed where it was held (object 0 is the tool on the Kuka)
+    assert np.linalg.norm(obs["agent_pos"][:3] - hold[:3]) < 0.005
+    env.close()
+
+
+def test_the_same_seed_gives_the_same_layout():
+    a = gym.make(env_id("stacking-2")).reset(seed=11)[0]
+    b = gym.make(env_id("stacking-2")).reset(seed=11)[0]
+    c = gym.make(env_id("stacking-2")).reset(seed=12)[0]
+    np.testing.assert_array_equal(a["environment_state"], b["environment_state"])
+    assert not np.allclose(a["environment_state"], c["environment_state"])
+
+
+def test_the_gripper_closes_only_within_reach(tasks):
+    env = HspEnv(tasks["stacking-1"], EnvConfig(max_steps=10))
+    obs, _ = env.reset(seed=0)
+    poses = world_poses(obs)
+    env.step(np.concatenate([poses[0], [1.0]]))  # block 1 is far from the hand
+    assert env.held == 0
+    above = poses[1].copy()
+    env.step(np.concatenate([above, [0.0]]))
+    for _ in range(8):
+        obs, *_ = env.step(np.concatenate([above, [1.0]]))
+    assert env.held == 1
+    with pytest.raises(HspError, match="grip command 7"):
+        env.step(np.concatenate([above, [7.0]]))
+    with pytest.raises(HspError, match="8 finite numbers"):
+        env.step(np.full(8, np.nan))
+    env.close()
+
+
+class _Shifted(Oracle):
+    """The demonstrator's plan with every command 1.5 cm off to the side."""
+
+    def act(self, poses):
+        a = super().act(poses)
+        a[1] += 0.015
+        return a
+
+
+def test_the_checkers_say_no_to_a_wrong_policy(tasks):
+    """The oracle stacks the tower; the same plan 1.5 cm off does not (tolerance 5 mm)."""
+    task = tasks["stacking-1"]
+    env = HspEnv(task, EnvConfig(max_steps=400))
+    good = run_episode(env, Oracle(task, 15, env.reach_error), seed=21)
+    bad = run_episode(env, _Shifted(task, 15, env.reach_error), seed=21)
+    env.close()
+    assert good["success"] and good["ended"] == "success"
+    assert not bad["success"] and bad["ended"] == "step limit" and bad["steps"] == 400
+    assert not all(bad["progress"].values())
