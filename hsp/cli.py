@@ -202,15 +202,17 @@ def label(
 @app.command()
 def train(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
-    method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels); the baselines are not built yet"),
+    method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels) | supervised (on the "
+                               "demonstrator's annotation: the upper bound)"),
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
-    labels: Optional[Path] = typer.Option(None, help="pseudo-labels [data/labels/TASK.parquet]"),
+    labels: Optional[Path] = typer.Option(None, help="pseudo-labels, for proposed [data/labels/TASK.parquet]"),
+    recordings: Optional[Path] = typer.Option(None, help="recordings with the annotation, for supervised [data/recordings/TASK]"),
     out: Optional[Path] = typer.Option(None, help="model directory [data/models/TASK/METHOD]"),
     iterations: Optional[int] = typer.Option(None, help="gradient steps [params: train.iterations]"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
-    """Train π_h, π_m and π_l on the pose dataset and its pseudo-labels."""
+    """Train π_h, π_m and π_l on the pose dataset and its pseudo-labels (or the annotation)."""
     import dataclasses
 
     from hsp.policy.stage import train_task
@@ -218,16 +220,17 @@ def train(
     from hsp.tasks.registry import load_task
 
     try:
-        if method != "proposed":
-            raise HspError(f"--method {method}: only 'proposed' is built yet (the baselines are not)")
+        if method not in ("proposed", "supervised"):
+            raise HspError(f"--method {method}: only 'proposed' and 'supervised' are built yet (the baselines are not)")
         params = load_params(params_file)
         cfg = section(params, "train", TrainConfig)
         if iterations is not None:
             cfg = dataclasses.replace(cfg, iterations=iterations)
         t = load_task(task)
         out_dir = out or Path("data/models") / task / method
-        report = train_task(t, dataset or Path("data/datasets") / task, labels or Path("data/labels") / f"{task}.parquet",
-                            out_dir, cfg, int(param(params, "seed", 0)))
+        source = ({"labels_file": labels or Path("data/labels") / f"{task}.parquet"} if method == "proposed"
+                  else {"recordings_dir": recordings or Path("data/recordings") / task})
+        report = train_task(t, dataset or Path("data/datasets") / task, out_dir, cfg, int(param(params, "seed", 0)), **source)
         _write_report(reports / task / method / "train.json", report, out_dir)
     except HspError as e:
         _fail(e)
@@ -263,7 +266,8 @@ def evaluate(
             videos=int(pick(videos, "eval.videos", 1)),
             recorded_episodes=int(param(params, f"record.episodes.{task}", 0)),
             env=EnvConfig(fps=int(param(params, "record.fps", 15)), max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
-                          grasp_reach_m=float(param(params, "eval.grasp_reach_m", 0.01))),
+                          **{k: float(v) for k in ("grasp_reach_m", "max_speed_m_s", "max_turn_deg_s")
+                             if (v := param(params, f"eval.{k}", None)) is not None}),
         )
         model_dir = None if method == "oracle" else (model or Path("data/models") / task / method)
         run_evaluation(t, method, observer, model_dir, cfg, out or Path("reports") / task / method)

@@ -90,6 +90,12 @@ def test_parse_ground_truth_ablation(tmp_path, monkeypatch):
     short = runner.invoke(app, ["train", "painting", "--dataset", str(ds), "--labels", str(tmp_path / "none.parquet"),
                                 "--out", str(tmp_path / "m2")])
     assert short.exit_code == 1 and "labels file not found" in short.output
+    # the supervised upper bound: the same networks on the demonstrator's annotation
+    result = runner.invoke(app, ["train", "painting", "--method", "supervised", "--dataset", str(ds), "--recordings", str(rec),
+                                 "--out", str(tmp_path / "sup"), "--reports", str(reports), "--params", str(params)])
+    assert result.exit_code == 0, result.output
+    sup = json.loads((reports / "painting" / "supervised" / "train.json").read_text())
+    assert sup["frames"] == trained["frames"] and sup["final_loss"] != trained["final_loss"]
     baseline = runner.invoke(app, ["train", "painting", "--method", "gail", "--dataset", str(ds)])
     assert baseline.exit_code == 1 and "only 'proposed'" in baseline.output
 

@@ -15,6 +15,7 @@ from hsp.dataset.features import TrackStatus
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.labeling.em import Fit, ScoreModel, em_label
+from hsp.geometry import relative
 from hsp.labeling.label import EpisodeLabels, canonical_poses, prepared_poses
 from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
 from hsp.labeling.stage import WAYPOINT_COLUMNS
@@ -56,6 +57,36 @@ def read_labels(path: Path, lengths: list[int]) -> list[EpisodeLabels]:
     return out
 
 
+def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray]) -> list[EpisodeLabels]:
+    """The demonstrator's own annotation as labels of the dataset's episodes (the
+    ``supervised`` upper bound): its tool and target, mapped onto the tracker's object
+    identities (identical objects are matched by distance, as the label metrics do), and
+    way-point frame k at the end of each annotated way-point's segment, where the tool has
+    arrived (w_t = p_k[o+, o*], as the pseudo-labels define it)."""
+    from hsp.dataset.build import identical_groups, list_recordings
+    from hsp.perception.metrics import match_identical
+    from hsp.recording.ground_truth import read_ground_truth
+
+    recs = list_recordings(recordings_dir)
+    if len(recs) != len(poses):
+        raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(poses)} dataset episodes")
+    groups, out = identical_groups(task), []
+    for path, p in zip(recs, poses):
+        gt = read_ground_truth(path)
+        if len(gt.tool) != len(p) or gt.objects != task.names:
+            raise HspError(f"{path}: annotation of {len(gt.tool)} frames of {gt.objects}, the dataset episode has {len(p)} "
+                           f"frames of {task.names}")
+        tracked = match_identical(groups, p, gt.poses)  # true object index → the tracker's
+        ends = np.flatnonzero(np.diff(gt.waypoint_index) != 0)
+        last = np.concatenate([ends, [len(p) - 1]])
+        k = last[np.searchsorted(last, np.arange(len(p)))]
+        tool, target = tracked[gt.tool], tracked[gt.target]
+        canon = canonical_poses(p, [o.symmetry for o in task.objects])
+        w = relative(canon[k, tool], canon[k, target])
+        out.append(EpisodeLabels(tool, target, k, w))
+    return out
+
+
 def labelled_steps(task: Task, world: list[np.ndarray], labels: list[EpisodeLabels]) -> list[Steps]:
     """Network inputs and targets of every episode (canonical poses, as the labels are)."""
     classes, n_classes = semantic_classes(task)
@@ -69,17 +100,25 @@ def labelled_steps(task: Task, world: list[np.ndarray], labels: list[EpisodeLabe
     return out
 
 
-def train_task(task: Task, dataset_dir: Path, labels_file: Path, out_dir: Path, cfg: TrainConfig,
-               seed: int) -> dict[str, float | int]:
+def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, seed: int, labels_file: Path | None = None,
+               recordings_dir: Path | None = None) -> dict[str, float | int]:
+    """Train on the pseudo-labels of ``labels_file`` or, for the supervised upper bound, on
+    the demonstrator's annotation in ``recordings_dir`` (exactly one of the two)."""
+    if (labels_file is None) == (recordings_dir is None):
+        raise HspError("train: give either a labels file or the recordings with the annotation")
     start = time.perf_counter()
     poses, _status, _ = load_episodes(dataset_dir, task.name, task.names)
     world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
-    labels = read_labels(labels_file, [len(p) for p in poses])
+    if labels_file is not None:
+        labels = read_labels(labels_file, [len(p) for p in poses])
+    else:
+        labels = annotation_labels(task, recordings_dir, poses)  # type: ignore[arg-type]
+    source = labels_file or recordings_dir
     steps = labelled_steps(task, world, labels)
     classes, n_classes = semantic_classes(task)
     fit_on, held = split(len(steps), cfg.validation_every)
     log.info("train %s: %d episodes (%d frames) from %s and %s, %d more held out to validate", task.name, len(fit_on),
-             sum(len(steps[i].pair) for i in fit_on), dataset_dir, labels_file, len(held))
+             sum(len(steps[i].pair) for i in fit_on), dataset_dir, source, len(held))
     policy, last = train([steps[i] for i in fit_on], task.names, classes, n_classes, cfg, seed)
     save(policy, cfg, out_dir)
     report: dict[str, float | int] = {
