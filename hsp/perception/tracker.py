@@ -345,90 +345,113 @@ def scene_points(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam:
     return pts[keep], cols[keep]
 
 
+class FrameTracker:
+    """The frame-to-frame tracker as a stream: ``update(rgb, depth)`` takes one frame and
+    returns the world poses ``(n, 7)`` and status ``(n,)`` of every object, from world poses
+    ``start (n, 7)`` at the first frame (``found (n,)`` says which of them are real). A lost
+    object is searched for locally, from its last good pose, in every frame; once lost for
+    ``cfg.redetect_after`` frames it is also searched for globally with ``redetect``, then
+    less and less often. A lost object's pose is its last good one (or prediction), marked
+    LOST.
+
+    With ``rest``, objects at rest are settled on their support (:mod:`hsp.perception.rest`),
+    and one that is hidden behind another while at rest is held there, marked SUSPECT.
+    :func:`track` runs it over a recording; closed-loop evaluation feeds it rendered frames."""
+
+    def __init__(self, K: np.ndarray, T_world_cam: np.ndarray, models: list[SurfaceModel], start: np.ndarray,
+                 cfg: TrackerConfig = TrackerConfig(), found: np.ndarray | None = None,
+                 redetect: Redetect | None = None, rest: RestState | None = None) -> None:
+        n = len(models)
+        self.K, self.T_world_cam, self.models, self.cfg, self.redetect, self.rest = K, T_world_cam, models, cfg, redetect, rest
+        self.prev = start.copy()
+        self.known = np.ones(n, bool) if found is None else found.copy()
+        self.lost_for = np.where(self.known, 0, 1)
+        self.dx, self.drot = np.zeros((n, 3)), np.zeros((n, 3))
+        self.fitted = np.zeros(n)  # fit cost at each object's last ICP solution
+        self.grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
+        self.in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
+        self.t = 0
+        if rest is not None:
+            rest.start(start, self.known)
+
+    def update(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Poses ``(n, 7)`` and status ``(n,)`` in the frame ``rgb (H, W, 3)``, ``depth (H, W)`` m."""
+        n = len(self.models)
+        pose_t = np.zeros((n, 7))
+        status_t = np.full(n, TrackStatus.OK, np.int64)
+        turned = np.zeros(n, bool)
+        measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
+        pts, cols = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
+        pred = predict(self.prev, self.dx, self.drot, self.cfg.damping)
+        owner = assign_points(pts, cols, self.models, pred, self.cfg, self.known)
+        for i in np.flatnonzero(self.known):
+            sel = _owned(owner, i, self.cfg)
+            if sel.size < self.cfg.min_points:
+                pose_t[i], status_t[i] = pred[i], TrackStatus.LOST
+                if self.rest is not None and self.rest.anchored[i] and _seen_past(
+                        self.models[i], pred[i], depth, self.K, self.T_world_cam) <= self.rest.cfg.max_seen_through:
+                    status_t[i] = TrackStatus.SUSPECT  # hidden where it rests: held there
+                continue
+            measured[i] = True
+            pose, cost, inliers, rmse, turned[i] = _register(self.models[i], pts[sel], cols[sel], pred[i], self.fitted[i], self.cfg)
+            self.fitted[i] = cost
+            status_t[i] = _status(inliers, rmse, self.cfg)
+            moving = i > 0 and (self.rest is None or not self.rest.anchored[i])  # a resting object has its own checks
+            if moving and status_t[i] != TrackStatus.LOST and _seen_past(
+                    self.models[i], pose, depth, self.K, self.T_world_cam) > self.cfg.max_seen_through:
+                status_t[i] = TrackStatus.SUSPECT
+                if self.known[0] and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0]):
+                    carried = pred.copy()
+                    carried[i] = compose(pose_t[0], self.grip[i])
+                    retry = _retry(i, carried, pts, cols, depth, self.K, self.T_world_cam, self.models, self.known, self.cfg)
+                    if retry is not None:
+                        pose, self.fitted[i] = retry
+                        status_t[i], turned[i] = TrackStatus.OK, True  # a correction, not motion
+            pose_t[i] = pose
+        pose_t[~self.known], status_t[~self.known] = self.prev[~self.known], TrackStatus.LOST
+        if self.rest is not None:
+            seen = measured & (status_t != TrackStatus.LOST)
+            pose_t = self.rest.apply(pose_t, seen)
+            look = np.flatnonzero(self.rest.fresh & self.rest.anchored & seen & (np.asarray(self.rest.periods) > 0))  # a heading to find
+            gradient = image_gradient(rgb) if look.size else None
+            for i in look:
+                edged = settle_on_edges(self.models[i], pose_t[i], pts[owner == i], gradient, self.rest.periods[i], self.K,
+                                        self.T_world_cam, self.cfg)
+                if edged is not None:
+                    pose_t[i], self.fitted[i] = self.rest.settle(i, edged[0]), edged[1]  # the solution to keep
+                self.rest.fresh[i] = False
+        k = self.lost_for // self.cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
+        search = np.flatnonzero((self.lost_for % self.cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
+        if self.redetect is not None and search.size:
+            found_poses, ok = self.redetect(pts[owner < 0], cols[owner < 0], search.tolist())
+            for i, p in zip(search[ok], found_poses[ok]):
+                pose_t[i], status_t[i], self.known[i] = p, TrackStatus.SUSPECT, True
+        good = status_t != TrackStatus.LOST
+        self.grip, self.in_hand = _grips(pose_t, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip, self.cfg)
+        if self.rest is not None:
+            self.grip[self.rest.anchored] = np.nan  # put down
+        if self.t > 0:
+            moved = good & (self.lost_for == 0)  # a velocity needs two good frames in a row
+            self.dx[moved] = pose_t[moved, :3] - self.prev[moved, :3]
+            self.drot[moved] = (Rotation.from_quat(pose_t[moved, 3:]) * Rotation.from_quat(self.prev[moved, 3:]).inv()).as_rotvec()
+        self.dx[~good | turned], self.drot[~good | turned] = 0.0, 0.0  # a half turn is a correction, not motion
+        self.prev[good] = pose_t[good]
+        self.lost_for = np.where(good, 0, self.lost_for + 1)
+        self.t += 1
+        return pose_t, status_t
+
+
 def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, models: list[SurfaceModel],
           start: np.ndarray, cfg: TrackerConfig = TrackerConfig(), found: np.ndarray | None = None,
           redetect: Redetect | None = None, progress: Callable[[], None] | None = None,
           rest: RestState | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Poses ``(T, n, 7)`` and status ``(T, n)`` over frames ``rgb (T, H, W, 3)``,
-    ``depth (T, H, W)``, from world poses ``start (n, 7)`` at frame 0 (``found (n,)``
-    says which of them are real). A lost object is searched for locally, from its last good
-    pose, in every frame; once lost for ``cfg.redetect_after`` frames it is also searched
-    for globally with ``redetect``, then less and less often. A lost object's
-    stored pose is its last good one (or prediction), marked LOST.
-
-    With ``rest``, objects at rest are settled on their support (:mod:`hsp.perception.rest`),
-    and one that is hidden behind another while at rest is held there, marked SUSPECT."""
-    T_frames, n = len(depth), len(models)
-    poses = np.zeros((T_frames, n, 7))
-    status = np.full((T_frames, n), TrackStatus.OK, np.int64)
-    prev = start.copy()
-    known = np.ones(n, bool) if found is None else found.copy()
-    lost_for = np.where(known, 0, 1)
-    dx, drot = np.zeros((n, 3)), np.zeros((n, 3))
-    fitted = np.zeros(n)  # fit cost at each object's last ICP solution
-    grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
-    in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
-    if rest is not None:
-        rest.start(start, known)
-    for t in range(T_frames):
-        turned = np.zeros(n, bool)
-        measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
-        pts, cols = scene_points(rgb[t], depth[t], K, T_world_cam, cfg)
-        pred = predict(prev, dx, drot, cfg.damping)
-        owner = assign_points(pts, cols, models, pred, cfg, known)
-        for i in np.flatnonzero(known):
-            sel = _owned(owner, i, cfg)
-            if sel.size < cfg.min_points:
-                poses[t, i], status[t, i] = pred[i], TrackStatus.LOST
-                if rest is not None and rest.anchored[i] and _seen_past(
-                        models[i], pred[i], depth[t], K, T_world_cam) <= rest.cfg.max_seen_through:
-                    status[t, i] = TrackStatus.SUSPECT  # hidden where it rests: held there
-                continue
-            measured[i] = True
-            pose, cost, inliers, rmse, turned[i] = _register(models[i], pts[sel], cols[sel], pred[i], fitted[i], cfg)
-            fitted[i] = cost
-            status[t, i] = _status(inliers, rmse, cfg)
-            moving = i > 0 and (rest is None or not rest.anchored[i])  # a resting object has its own checks
-            if moving and status[t, i] != TrackStatus.LOST and _seen_past(
-                    models[i], pose, depth[t], K, T_world_cam) > cfg.max_seen_through:
-                status[t, i] = TrackStatus.SUSPECT
-                if known[0] and status[t, 0] != TrackStatus.LOST and not np.isnan(grip[i, 0]):
-                    carried = pred.copy()
-                    carried[i] = compose(poses[t, 0], grip[i])
-                    retry = _retry(i, carried, pts, cols, depth[t], K, T_world_cam, models, known, cfg)
-                    if retry is not None:
-                        pose, fitted[i] = retry
-                        status[t, i], turned[i] = TrackStatus.OK, True  # a correction, not motion
-            poses[t, i] = pose
-        poses[t, ~known], status[t, ~known] = prev[~known], TrackStatus.LOST
-        if rest is not None:
-            seen = measured & (status[t] != TrackStatus.LOST)
-            poses[t] = rest.apply(poses[t], seen)
-            look = np.flatnonzero(rest.fresh & rest.anchored & seen & (np.asarray(rest.periods) > 0))  # a heading to find
-            gradient = image_gradient(rgb[t]) if look.size else None
-            for i in look:
-                edged = settle_on_edges(models[i], poses[t, i], pts[owner == i], gradient, rest.periods[i], K,
-                                        T_world_cam, cfg)
-                if edged is not None:
-                    poses[t, i], fitted[i] = rest.settle(i, edged[0]), edged[1]  # the solution to keep
-                rest.fresh[i] = False
-        k = lost_for // cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
-        search = np.flatnonzero((lost_for % cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
-        if redetect is not None and search.size:
-            found_poses, ok = redetect(pts[owner < 0], cols[owner < 0], search.tolist())
-            for i, p in zip(search[ok], found_poses[ok]):
-                poses[t, i], status[t, i], known[i] = p, TrackStatus.SUSPECT, True
-        good = status[t] != TrackStatus.LOST
-        grip, in_hand = _grips(poses[t], status[t] == TrackStatus.OK, prev, in_hand, grip, cfg)
-        if rest is not None:
-            grip[rest.anchored] = np.nan  # put down
-        if t > 0:
-            moved = good & (lost_for == 0)  # a velocity needs two good frames in a row
-            dx[moved] = poses[t, moved, :3] - prev[moved, :3]
-            drot[moved] = (Rotation.from_quat(poses[t, moved, 3:]) * Rotation.from_quat(prev[moved, 3:]).inv()).as_rotvec()
-        dx[~good | turned], drot[~good | turned] = 0.0, 0.0  # a half turn is a correction, not motion
-        prev[good] = poses[t, good]
-        lost_for = np.where(good, 0, lost_for + 1)
+    ``depth (T, H, W)``: :class:`FrameTracker` run over them."""
+    tracker = FrameTracker(K, T_world_cam, models, start, cfg, found, redetect, rest)
+    poses = np.zeros((len(depth), len(models), 7))
+    status = np.zeros((len(depth), len(models)), np.int64)
+    for t in range(len(depth)):
+        poses[t], status[t] = tracker.update(rgb[t], depth[t])
         if progress is not None:
             progress()
     return poses, status
