@@ -253,6 +253,8 @@ def evaluate(
     with the paper's success criteria (eval.json, episodes.jsonl, videos/)."""
     from hsp.evaluation.env import EnvConfig
     from hsp.evaluation.rollout import EvalConfig
+    from hsp.perception.tracker import TrackerConfig
+    from hsp.recording.record import camera_rig
     from hsp.evaluation.rollout import evaluate as run_evaluation
     from hsp.tasks.registry import load_task
 
@@ -268,6 +270,7 @@ def evaluate(
             env=EnvConfig(fps=int(param(params, "record.fps", 15)), max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
                           **{k: float(v) for k in ("grasp_reach_m", "max_speed_m_s", "max_turn_deg_s")
                              if (v := param(params, f"eval.{k}", None)) is not None}),
+            rig=camera_rig(params), tracker=section(params, "tracker", TrackerConfig),
         )
         model_dir = None if method == "oracle" else (model or Path("data/models") / task / method)
         run_evaluation(t, method, observer, model_dir, cfg, out or Path("reports") / task / method)

@@ -19,6 +19,7 @@ import pybullet as p
 
 from hsp.errors import HspError
 from hsp.geometry import inverse, normalize_quat, rotation_angle_deg, slerp, transform_points
+from hsp.evaluation.observers import Observer, SimObserver
 from hsp.geometry.mesh import obj_vertices
 from hsp.sim.scene import SIM_HZ, Scene
 from hsp.tasks.layout import sample_layout
@@ -66,15 +67,18 @@ def world_poses(obs: dict[str, np.ndarray]) -> np.ndarray:
 
 
 class HspEnv(gym.Env):
-    """One task on the Kuka. Action ``(8,)``: the tool-centre point's world pose
+    """One task on the Kuka, seen through an observer (default: the simulator's poses;
+    :mod:`~hsp.evaluation.observers`). Action ``(8,)``: the tool-centre point's world pose
     ``[x, y, z, qx, qy, qz, qw]`` at the end of the step, then the object to hold (0: none;
     ``i``: close on object ``i`` once it is within grasp reach; it is let go when the command
     returns to 0). The arm moves there along a straight line and a slerp over the step."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
-    def __init__(self, task: Task, config: EnvConfig = EnvConfig(), render_mode: str | None = None) -> None:
+    def __init__(self, task: Task, config: EnvConfig = EnvConfig(), render_mode: str | None = None,
+                 observer: Observer | None = None) -> None:
         self.task, self.config, self.render_mode = task, config, render_mode
+        self.observer: Observer = observer or SimObserver()
         self.metadata = {**self.metadata, "render_fps": config.fps}
         n = len(task.objects)
         self.observation_space = gym.spaces.Dict({
@@ -100,7 +104,8 @@ class HspEnv(gym.Env):
         self.held = 0
         self.steps = 0
         self.poses = [self.scene.object_poses()]
-        return observation(self.poses[-1]), self._info()
+        seen = self.observer.reset(self.poses[-1], seed if seed is not None else int(self.np_random.integers(2**31)))
+        return observation(seen), self._info()
 
     def step(self, action: np.ndarray) -> tuple[dict, float, bool, bool, dict]:
         if self.scene is None:
@@ -122,7 +127,7 @@ class HspEnv(gym.Env):
         info = self._info()
         terminated = info["is_success"]
         truncated = not terminated and self.steps >= self.config.max_steps
-        return observation(self.poses[-1]), float(terminated), terminated, truncated, info
+        return observation(self.observer.observe(self.poses[-1])), float(terminated), terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
         """An RGB frame (PyBullet's TinyRenderer, 320×240, the arm included) from across the table."""

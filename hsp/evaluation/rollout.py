@@ -19,9 +19,12 @@ from rich.progress import Progress
 
 from hsp.errors import HspError
 from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
+from hsp.evaluation.observers import CameraObserver, Observer, SimObserver
 from hsp.evaluation.stats import summarise
 from hsp.fileio import atomic_path, write_json
+from hsp.perception.tracker import TrackerConfig
 from hsp.recording.record import episode_seed
+from hsp.recording.writer import CameraRig
 from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
@@ -47,6 +50,10 @@ class EvalConfig:
     recorded_episodes: int = 0
     """Recordings of the task made from ``seed``; their seeds are never test layouts."""
     env: EnvConfig = field(default_factory=EnvConfig)
+    rig: CameraRig | None = None
+    """The recordings' camera and depth model, for ``--observer camera``."""
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    """The tracker's settings, for ``--observer camera`` (``params.yaml: tracker``)."""
 
     def __post_init__(self) -> None:
         for key in ("episodes", "runs", "workers"):
@@ -111,13 +118,23 @@ def write_video(path: Path, frames: list[np.ndarray], fps: int) -> None:
     writer.release()
 
 
+def make_observer(task: Task, observer: str, cfg: EvalConfig) -> Observer:
+    if observer == "sim":
+        return SimObserver()
+    if observer == "camera":
+        if cfg.rig is None:
+            raise HspError("--observer camera needs the recordings' camera (params.yaml: camera, depth_noise)")
+        return CameraObserver(task, cfg.rig, cfg.tracker, cfg.seed)
+    raise HspError(f"unknown observer {observer!r}; valid observers: {', '.join(OBSERVERS)}")
+
+
 def _job(args: tuple) -> dict:
-    task_name, pipeline_dir, method, model_dir, cfg, run, episode, seed, video = args
+    task_name, pipeline_dir, method, observer, model_dir, cfg, run, episode, seed, video = args
     import torch
 
     torch.set_num_threads(1)
     task = load_task(task_name, pipeline_dir)
-    env = HspEnv(task, cfg.env, render_mode="rgb_array" if video else None)
+    env = HspEnv(task, cfg.env, "rgb_array" if video else None, make_observer(task, observer, cfg))
     try:
         record = run_episode(env, make_agent(task, method, model_dir, env), seed, video)
     finally:
@@ -133,8 +150,8 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
         raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
     if observer not in OBSERVERS:
         raise HspError(f"unknown observer {observer!r}; valid observers: {', '.join(OBSERVERS)}")
-    if observer == "camera":
-        raise HspError("--observer camera: online tracking of rendered RGB-D is not built yet (issue 18); use --observer sim")
+    if observer == "camera" and cfg.rig is None:
+        raise HspError("--observer camera needs the recordings' camera (params.yaml: camera, depth_noise)")
     if method != "oracle":
         if model_dir is None or not Path(model_dir).exists():
             raise HspError(f"{model_dir}: model directory not found (run `hsp train {task.name} --method {method}`)")
@@ -148,7 +165,7 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
     start = time.perf_counter()
     with atomic_path(out_dir / f"videos{suffix}") as videos:
         videos.mkdir(parents=True)
-        jobs = [(task.name, task.objects_dir.parent, method, model_dir, cfg, r, e, int(seeds[r, e]),
+        jobs = [(task.name, task.objects_dir.parent, method, observer, model_dir, cfg, r, e, int(seeds[r, e]),
                  videos / f"run{r}_episode{e:03d}.mp4" if e < cfg.videos else None)
                 for r in range(cfg.runs) for e in range(cfg.episodes)]
         log.info("eval %s: %s, observer %s, %d runs × %d episodes, %d workers", task.name, method, observer, cfg.runs,

@@ -18,7 +18,7 @@ from hsp.errors import HspError
 from hsp.geometry.symmetry import z_folds
 from hsp.perception.initialize import initialize
 from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState
-from hsp.perception.tracker import SurfaceModel, TrackerConfig, scene_points, track
+from hsp.perception.tracker import FrameTracker, SurfaceModel, TrackerConfig, scene_points
 from hsp.recording.reader import Recording
 from hsp.sim.render import load_mesh
 from hsp.tasks.registry import Task
@@ -54,6 +54,22 @@ def rest_state(task: Task, models: list[SurfaceModel], cfg: RestConfig = RestCon
     return RestState(axes, [m.surface for m in models], periods, cfg, mounted=mounted)
 
 
+def first_frame_tracker(task: Task, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
+                        models: list[SurfaceModel], cfg: TrackerConfig = TrackerConfig()) -> FrameTracker:
+    """The scene estimate of a first frame (``rgb (H, W, 3)``, ``depth (H, W)`` m) and the
+    stream tracker that starts from it, re-detecting lost objects with the same estimator;
+    feed it every frame from this one on."""
+    camera = T_world_cam[:3]
+    pts, cols = scene_points(rgb, depth, K, T_world_cam, cfg)
+    first, found = initialize(task, pts, cols, models, camera, cfg)
+
+    def redetect(p: np.ndarray, c: np.ndarray, idx: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        poses, ok = initialize(task, p, c, models, camera, cfg, only=idx, first_frame=False)
+        return poses[idx], ok[idx]
+
+    return FrameTracker(K, T_world_cam, models, first, cfg, found, redetect, rest_state(task, models, cfg.rest))
+
+
 def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg: TrackerConfig = TrackerConfig(),
                     progress: Callable[[], None] | None = None) -> TrackedEpisode:
     """Estimate the first frame's scene, then track every object through ``rec``."""
@@ -61,15 +77,12 @@ def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg:
         raise HspError(f"{rec.path}: no camera pose (no /tf_static chain from the table frame to "
                        f"{rec.frame_id!r}); the tracker needs it to place the table plane")
     start = time.perf_counter()
-    camera = rec.T_world_cam[:3]
-    pts, cols = scene_points(rec.rgb[0], rec.depth[0], rec.K, rec.T_world_cam, cfg)
-    first, found = initialize(task, pts, cols, models, camera, cfg)
+    tracker = first_frame_tracker(task, rec.rgb[0], rec.depth[0], rec.K, rec.T_world_cam, models, cfg)
     first_frame = time.perf_counter() - start
-
-    def redetect(p: np.ndarray, c: np.ndarray, idx: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        poses, ok = initialize(task, p, c, models, camera, cfg, only=idx, first_frame=False)
-        return poses[idx], ok[idx]
-
-    poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, first, cfg, found, redetect, progress,
-                          rest_state(task, models, cfg.rest))
+    n = len(models)
+    poses, status = np.zeros((len(rec.depth), n, 7)), np.zeros((len(rec.depth), n), np.int64)
+    for t in range(len(rec.depth)):
+        poses[t], status[t] = tracker.update(rec.rgb[t], rec.depth[t])
+        if progress is not None:
+            progress()
     return TrackedEpisode(poses, status, time.perf_counter() - start, first_frame)

@@ -1,0 +1,66 @@
+"""What a policy sees of the scene in closed loop.
+
+* ``sim``: the simulator's true poses.
+* ``camera``: what the paper's real robot had. Every control step renders colour and
+  depth of the scene with the recordings' camera (pose jittered per episode) and depth
+  sensor model, and the tracker that built the datasets estimates the poses online, frame
+  by frame (:class:`~hsp.perception.tracker.FrameTracker`). The true poses only place the
+  meshes in the rendered image; the tracker never reads them. As in the recordings, the
+  image shows the task's objects, not the arm.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from hsp.perception.episode import first_frame_tracker, object_models
+from hsp.perception.tracker import TrackerConfig
+from hsp.recording.writer import CameraRig
+from hsp.sim.camera import sample_camera_pose
+from hsp.sim.depth_noise import add_depth_noise
+from hsp.sim.render import RgbdRenderer, load_mesh
+from hsp.tasks.registry import Task
+
+
+class Observer(Protocol):
+    def reset(self, true_poses: np.ndarray, seed: int) -> np.ndarray: ...
+
+    def observe(self, true_poses: np.ndarray) -> np.ndarray: ...
+
+
+class SimObserver:
+    """The simulator's world poses ``(n, 7)``, as they are."""
+
+    def reset(self, true_poses: np.ndarray, seed: int) -> np.ndarray:
+        return true_poses
+
+    def observe(self, true_poses: np.ndarray) -> np.ndarray:
+        return true_poses
+
+
+class CameraObserver:
+    """Poses ``(n, 7)`` tracked online in rendered, noisy RGB-D frames."""
+
+    def __init__(self, task: Task, rig: CameraRig, tracker: TrackerConfig = TrackerConfig(), seed: int = 0) -> None:
+        self.task, self.rig, self.cfg = task, rig, tracker
+        self.models = object_models(task, tracker, seed)
+        self.renderer = RgbdRenderer([load_mesh(task.mesh(i)) for i in range(len(task.objects))], rig.camera)
+        self.status = np.zeros(len(task.objects), np.int64)
+
+    def _frame(self, true_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rgb, depth, _ = self.renderer.render(self.T_world_cam, true_poses)
+        return rgb, add_depth_noise(depth, self.rig.camera.fx, self.rig.noise, self.rng).astype(np.float32) / 1000.0
+
+    def reset(self, true_poses: np.ndarray, seed: int) -> np.ndarray:
+        self.rng = np.random.default_rng([seed, 1])  # camera pose and sensor noise, apart from the layout's stream
+        self.T_world_cam = sample_camera_pose(self.rig.camera, self.rng)
+        rgb, depth = self._frame(true_poses)
+        self.tracker = first_frame_tracker(self.task, rgb, depth, self.rig.camera.K, self.T_world_cam, self.models, self.cfg)
+        poses, self.status = self.tracker.update(rgb, depth)
+        return poses
+
+    def observe(self, true_poses: np.ndarray) -> np.ndarray:
+        poses, self.status = self.tracker.update(*self._frame(true_poses))
+        return poses
