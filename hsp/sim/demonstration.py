@@ -57,9 +57,9 @@ class PlanContext:
     task: Task
     rng: np.random.Generator
     poses: Callable[[], np.ndarray]
-    reach_error: Callable[[np.ndarray], float] | None = None
-    """Position error (m) of the arm's best IK solution for a world pose of object 0;
-    ``None`` for the floating hand, which reaches every pose."""
+    reach_error: Callable[[list[np.ndarray]], float] | None = None
+    """How far (m) the arm, from its present posture, falls short of a chain of world poses
+    of object 0; ``None`` for the floating hand, which reaches every pose."""
 
 
 class _Recorder:

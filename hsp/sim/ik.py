@@ -12,11 +12,15 @@ import numpy as np
 import pybullet as p
 import pybullet_data
 
+from hsp.geometry import rotation_angle_deg
+
 KUKA_URDF = "kuka_iiwa/model.urdf"
 EE_LINK = 6
 UPPER = np.array([2.96, 2.09, 2.96, 2.09, 2.96, 2.09, 3.05]) - 0.05
 """The URDF's joint limits less a 0.05 rad margin (the physics clamps at the limits)."""
 LOWER = -UPPER
+ROTATION_ARM_M = 0.1
+"""An orientation error of 1 rad counts as 0.1 m of position error (:meth:`KukaIK.pose_error`)."""
 RANGES = UPPER - LOWER
 REST = np.array([0.0, 0.55, 0.0, -1.35, 0.0, 1.25, 0.0])
 """Elbow up, flange pointing down about 0.6 m in front of the base, joint 7 mid-range."""
@@ -64,6 +68,27 @@ class KukaIK:
                 )
             )
         return np.clip(q, LOWER, UPPER)
+
+    def pose_error(self, q: np.ndarray, T_world_flange: np.ndarray) -> float:
+        """How far the flange at joints ``q`` is from ``T_world_flange``: position error (m)
+        plus ``ROTATION_ARM_M`` per radian of orientation error."""
+        got = self.flange_pose(q)
+        angle = np.radians(rotation_angle_deg(got[3:], T_world_flange[3:]))
+        return float(np.linalg.norm(got[:3] - T_world_flange[:3]) + ROTATION_ARM_M * angle)
+
+    def solve_from(self, T_world_flange: np.ndarray, seeds: list[np.ndarray], tolerance: float = 1e-3) -> np.ndarray:
+        """The solution from the first of ``seeds`` whose :meth:`pose_error` is within
+        ``tolerance``, else the best one: a posture that cannot reach a pose by small joint
+        changes (another IK branch, joint 7 at its limit) is left for one that can."""
+        best, best_err = None, np.inf
+        for seed in seeds:
+            q = self.solve(T_world_flange, seed)
+            err = self.pose_error(q, T_world_flange)
+            if err < best_err:
+                best, best_err = q, err
+            if err <= tolerance:
+                break
+        return best  # type: ignore[return-value]
 
     def close(self) -> None:
         if p.isConnected(self.client):

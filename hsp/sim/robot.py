@@ -12,12 +12,15 @@ import numpy as np
 import pybullet as p
 import pybullet_data
 
-from hsp.geometry import compose, inverse
+from hsp.geometry import compose, inverse, rotation_angle_deg, slerp
 from hsp.sim.grasp import Gripper, body_pose
 from hsp.sim.ik import EE_LINK, KUKA_URDF, REST, KukaIK
 
 FLANGE_OFFSET = 0.05
 """Distance from the link-6 frame to the flange face along its z axis (m)."""
+PATH_STEP_M = 0.02
+PATH_STEP_DEG = 5.0
+"""Spacing of the poses at which :meth:`KukaArm.reach_error` checks a path."""
 IK_EVERY = 4
 """Solve IK on every 4th physics step (60 Hz control at 240 Hz physics)."""
 
@@ -69,19 +72,32 @@ class KukaArm:
             return
         self._last_command = np.array(T_world_tcp, copy=True)
         T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))
-        self.q_target = self.ik.solve(T_world_flange, self.q_target)
+        self.q_target = self.ik.solve_from(T_world_flange, [self.q_target, REST])
         p.setJointMotorControlArray(
             self.robot, self.joints, p.POSITION_CONTROL, targetPositions=self.q_target.tolist(),
             forces=[self.max_force] * 7, positionGains=[0.3] * 7, velocityGains=[1.0] * 7,
             physicsClientId=self.client,
         )
 
-    def reach_error(self, T_world_tcp: np.ndarray) -> float:
-        """Position error (m) of the flange for the IK solution from the rest posture that
-        puts the tool-centre point at ``T_world_tcp (7,)``: near 0 where the arm reaches."""
-        T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))
-        q = self.ik.solve(T_world_flange, REST)
-        return float(np.linalg.norm(self.ik.flange_pose(q)[:3] - T_world_flange[:3]))
+    def reach_error(self, T_world_tcps: list[np.ndarray]) -> float:
+        """Worst :meth:`~hsp.sim.ik.KukaIK.pose_error` of the flange on the way from the
+        last commanded pose through a chain of tool-centre-point poses ``(7,)`` each, the way
+        :meth:`command` would go: straight lines and slerps sampled every ``PATH_STEP_M`` or
+        ``PATH_STEP_DEG``, each IK solve seeded with the one before, the first with the
+        arm's present posture. Near 0 where the arm gets there by small joint changes."""
+        q, worst = self.q_target, 0.0
+        start = self._last_command if self._last_command is not None else self.tcp_pose()
+        for T in T_world_tcps:
+            n = int(max(1, np.ceil(np.linalg.norm(T[:3] - start[:3]) / PATH_STEP_M),
+                        np.ceil(rotation_angle_deg(start[3:], T[3:]) / PATH_STEP_DEG)))
+            s = np.arange(1, n + 1) / n
+            path = np.concatenate([start[:3] + s[:, None] * (T[:3] - start[:3]), slerp(start[3:], T[3:], s)], axis=1)
+            for P in path:
+                T_world_flange = compose(P, inverse(self.T_flange_tcp))
+                q = self.ik.solve(T_world_flange, q)
+                worst = max(worst, self.ik.pose_error(q, T_world_flange))
+            start = T
+        return worst
 
     def reset_to(self, T_world_tcp: np.ndarray) -> None:
         """Teleport the arm (and tool) so that the TCP is at ``T_world_tcp``; for layouts."""

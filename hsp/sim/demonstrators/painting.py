@@ -33,7 +33,15 @@ def painting_plan(ctx: "PlanContext") -> Iterator[Step]:
     along = rng.uniform(-0.06, -0.06 + 2 * d.grasp_offset)
     world_yaw = float(Rotation.from_quat(poses[brush, 3:]).as_euler("xyz")[2])
     yaw = nearest_yaw(world_yaw + np.pi / 2 + np.array([0.0, np.pi]), hand_yaw(poses[hand])) - world_yaw
-    tilt = Rotation.from_euler("xz", [rng.normal(0, 0.05), yaw])
+    roll = rng.normal(0, 0.05)
+
+    def hand_on_brush(yaw: float, height: float) -> np.ndarray:
+        return pose([along, 0.0, height], Rotation.from_euler("xz", [roll, yaw]))
+
+    # a robot takes the mirrored grasp (the hand looks the same turned by π) if its arm cannot reach this one
+    yaw = reachable_yaw(yaw, lambda y: [compose(ctx.poses()[brush], hand_on_brush(y, h)) for h in (d.approach_height, 0.0)],
+                        ctx.reach_error, candidates=2)
+    tilt = Rotation.from_euler("xz", [roll, yaw])
     grasp = pose([along, 0.0, 0.0], tilt)
     yield Move(hand, brush, pose([along, 0.0, d.approach_height], tilt))
     yield Move(hand, brush, grasp, straight=True, slow=1.3)
