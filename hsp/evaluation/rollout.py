@@ -76,6 +76,16 @@ def held_out_seeds(seed: int, runs: int, episodes: int, recorded_episodes: int) 
     return out
 
 
+def load_runner(task: Task, method: str, model_dir: Path | None):
+    """The runner of a trained hierarchy; a one-line error for a missing, damaged or foreign model."""
+    from hsp.evaluation.proposed import HierarchyRunner
+    from hsp.policy.train import load
+
+    if model_dir is None or not Path(model_dir).exists():
+        raise HspError(f"{model_dir}: model directory not found (run `hsp train {task.name} --method {method}`)")
+    return HierarchyRunner(load(model_dir), task, str(model_dir))
+
+
 def make_agent(task: Task, method: str, model_dir: Path | None, env: HspEnv):
     """The policy object of a method: ``reset(poses, seed)``, ``act(poses) -> action``."""
     if method == "oracle":
@@ -83,12 +93,7 @@ def make_agent(task: Task, method: str, model_dir: Path | None, env: HspEnv):
 
         return Oracle(task, env.config.fps, env.reach_error)
     if method in ("proposed", "supervised"):
-        from hsp.evaluation.proposed import HierarchyRunner
-        from hsp.policy.train import load
-
-        if model_dir is None:
-            raise HspError(f"--method {method} needs a model directory")
-        return HierarchyRunner(load(model_dir), task, str(model_dir))
+        return load_runner(task, method, model_dir)
     raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
 
 
@@ -148,17 +153,9 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
     ``videos/`` into ``out_dir`` (suffixed ``_camera`` for that observer), all or nothing."""
     if method not in METHODS:
         raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
-    if observer not in OBSERVERS:
-        raise HspError(f"unknown observer {observer!r}; valid observers: {', '.join(OBSERVERS)}")
-    if observer == "camera" and cfg.rig is None:
-        raise HspError("--observer camera needs the recordings' camera (params.yaml: camera, depth_noise)")
+    make_observer(task, observer, cfg)  # bad input fails here, before any episode
     if method != "oracle":
-        if model_dir is None or not Path(model_dir).exists():
-            raise HspError(f"{model_dir}: model directory not found (run `hsp train {task.name} --method {method}`)")
-        from hsp.evaluation.proposed import HierarchyRunner
-        from hsp.policy.train import load
-
-        HierarchyRunner(load(model_dir), task, str(model_dir))  # a wrong or old model fails here, before any episode
+        load_runner(task, method, model_dir)
     suffix = "" if observer == "sim" else f"_{observer}"
     seeds = held_out_seeds(cfg.seed, cfg.runs, cfg.episodes, cfg.recorded_episodes)
     out_dir = Path(out_dir)
