@@ -36,6 +36,18 @@ def apply_step(current: np.ndarray, step: np.ndarray) -> np.ndarray:
     return np.concatenate([current[:3] + step[:3], q])
 
 
+def tcp_command(poses: np.ndarray, canonical: np.ndarray, tool: int, target: int, step: np.ndarray) -> np.ndarray:
+    """The tool-centre point's world pose ``(7,)`` that moves ``tool`` by π_l's ``step (6,)``,
+    given in the target's canonical frame, with the tool held as it is now. ``poses`` and
+    ``canonical`` are the world poses ``(n, 7)`` as observed and with symmetric objects'
+    orientations made canonical; the tool keeps its own symmetry offset, so the arm does
+    not turn to a look-alike orientation."""
+    rel = relative(canonical[tool], canonical[target])
+    offset = relative(poses[tool], canonical[tool])
+    tool_next = compose(compose(canonical[target], apply_step(rel, step)), offset)
+    return tool_next if tool == 0 else compose(tool_next, relative(poses[0], poses[tool]))
+
+
 class HierarchyRunner:
     """Stateful runner of a trained :class:`~hsp.policy.train.Policy`: ``reset(poses, seed)``
     then ``act(poses)`` per control step with world poses ``(n, 7)``; returns the action
@@ -92,9 +104,5 @@ class HierarchyRunner:
         self.trace.append({"history": history, "pair": pair, "waypoint": w.numpy().astype(np.float64)})
         self.pair, self.waypoint = pair, w.numpy().astype(np.float64)
         tool, target = (int(x) for x in self.pairs[pair])
-        # The tool's next pose: the step in the target's (canonical) frame, the tool's own
-        # symmetry offset kept, so the arm does not turn to a look-alike orientation.
-        offset = relative(poses[tool], world[tool])
-        tool_next = compose(compose(world[target], apply_step(rel[pair], a.numpy().astype(np.float64))), offset)
-        tcp = tool_next if tool == 0 else compose(tool_next, relative(poses[0], poses[tool]))
+        tcp = tcp_command(poses, world, tool, target, a.numpy().astype(np.float64))
         return np.concatenate([tcp, [float(tool)]])

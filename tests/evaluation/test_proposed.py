@@ -2,6 +2,7 @@
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
 from hsp.evaluation.proposed import HierarchyRunner, apply_step
@@ -71,3 +72,31 @@ def test_identical_objects_keep_the_chosen_one(tasks):
     runner.pair = first
     logp[bolts] = np.log([0.4, 0.2, 0.2, 0.1])  # another nut now scores higher, the label pair is the same
     assert runner._choose(logp) == first
+
+
+def test_the_labelled_step_commands_the_next_pose(tasks):
+    """π_l's step (a frame's small motion), converted to a command for the hand holding a
+    block, puts the hand where it must be for the block to make that step."""
+    from hsp.evaluation.proposed import tcp_command
+    from hsp.geometry import compose, relative
+    from hsp.labeling.label import canonical_poses
+
+    task = tasks["stacking-1"]
+    sym = [o.symmetry for o in task.objects]
+    rng = np.random.default_rng(2)
+
+    def random_pose(z):
+        q = rng.normal(size=4)
+        return np.concatenate([rng.uniform(0.4, 0.6, 3) * [1, 1, z], q / np.linalg.norm(q)])
+
+    now = np.stack([random_pose(1.0) for _ in task.objects])
+    grasp = relative(now[0], now[1])  # the hand in the block's frame, rigid
+    later = now.copy()
+    small = np.concatenate([[0.02, -0.01, 0.015], Rotation.from_rotvec([0.03, -0.05, 0.08]).as_quat()])
+    later[1] = compose(small, now[1])
+    later[0] = compose(later[1], grasp)
+    c_now, c_later = canonical_poses(now[None], sym)[0], canonical_poses(later[None], sym)[0]
+    step = rotvec_delta(relative(c_now[1], c_now[3]), relative(c_later[1], c_later[3]))
+    tcp = tcp_command(now, c_now, 1, 3, step)
+    np.testing.assert_allclose(tcp[:3], later[0, :3], atol=1e-9)
+    assert abs(abs(tcp[3:] @ later[0, 3:]) - 1) < 1e-9
