@@ -134,7 +134,7 @@ class HspEnv(gym.Env):
         if self.render_mode != "rgb_array" or self.scene is None:
             return None
         c = self.scene.client
-        view = p.computeViewMatrix([1.05, -0.45, 0.55], [0.5, 0.0, 0.08], [0, 0, 1], physicsClientId=c)
+        view = p.computeViewMatrix([1.3, -0.8, 0.75], [0.5, 0.0, 0.1], [0, 0, 1], physicsClientId=c)
         proj = p.computeProjectionMatrixFOV(45, 320 / 240, 0.05, 5.0, physicsClientId=c)
         rgba = p.getCameraImage(320, 240, view, proj, renderer=p.ER_TINY_RENDERER, physicsClientId=c)[2]
         return np.asarray(rgba, np.uint8).reshape(240, 320, 4)[..., :3]
