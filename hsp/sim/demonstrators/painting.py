@@ -58,16 +58,17 @@ def painting_plan(ctx: "PlanContext") -> Iterator[Step]:
     pitch = np.pi / 2 + rng.normal(0, 0.08)
     offset = np.concatenate([rng.uniform(-0.008, 0.008, 2), [rng.uniform(-0.005, 0.005)]])
 
-    def dip(heading: float) -> tuple[Rotation, np.ndarray, np.ndarray]:
+    def dip(heading: float) -> list[np.ndarray]:
+        """The dip's way-points, the brush in the bucket's frame: above the paint, in it, out."""
         R = Rotation.from_euler("z", heading) * Rotation.from_euler("y", pitch)
         at = paint + offset - R.apply(tip)
-        return R, at, at + [0, 0, 0.13]
+        above = at + [0, 0, 0.13]
+        return [pose(above, R), pose(at, R), pose(above + [0, 0, 0.02], R)]
 
-    heading = reachable_yaw(heading, lambda h: hand_at(bucket, *(pose(x, dip(h)[0]) for x in dip(h)[1:])), ctx.reach_error)
-    R_dip, at_paint, above = dip(heading)
-    yield Move(brush, bucket, pose(above, R_dip))
-    yield Move(brush, bucket, pose(at_paint, R_dip), straight=True, slow=1.2)
-    yield Move(brush, bucket, pose(above + [0, 0, 0.02], R_dip), straight=True)
+    above, at_paint, lifted = dip(reachable_yaw(heading, lambda h: hand_at(bucket, *dip(h)), ctx.reach_error))
+    yield Move(brush, bucket, above)
+    yield Move(brush, bucket, at_paint, straight=True, slow=1.2)
+    yield Move(brush, bucket, lifted, straight=True)
 
     # (brush, canvas): onto the plane above the canvas, a straight stroke, lift.
     hx, hy = s.surface_half_extent or (0.1, 0.07)
@@ -79,14 +80,14 @@ def painting_plan(ctx: "PlanContext") -> Iterator[Step]:
     heading = rng.uniform(-np.pi, np.pi)
     pitch = np.pi / 2 - rng.uniform(0.0, 0.3)
 
-    def stroke(heading: float) -> tuple[Rotation, np.ndarray, np.ndarray]:
+    def stroke(heading: float) -> list[np.ndarray]:
+        """The stroke's way-points, the brush in the canvas's frame: over the start, at it, to the end, lifted."""
         R = Rotation.from_euler("z", heading) * Rotation.from_euler("y", pitch)
-        return R, centre - half - R.apply(tip), centre + half - R.apply(tip)
+        start, end = centre - half - R.apply(tip), centre + half - R.apply(tip)
+        return [pose(start + [0, 0, 0.06], R), pose(start, R), pose(end, R), pose(end + [0, 0, 0.08], R)]
 
-    heading = reachable_yaw(heading, lambda h: hand_at(canvas, *(pose(x + dz, stroke(h)[0]) for x in stroke(h)[1:]
-                                                                 for dz in ([0, 0, 0], [0, 0, 0.08]))), ctx.reach_error)
-    R_paint, start, end = stroke(heading)
-    yield Move(brush, canvas, pose(start + [0, 0, 0.06], R_paint))
-    yield Move(brush, canvas, pose(start, R_paint), straight=True, slow=1.2)
-    yield Move(brush, canvas, pose(end, R_paint), straight=True, slow=1.5)
-    yield Move(brush, canvas, pose(end + [0, 0, 0.08], R_paint), straight=True)
+    over, start, end, lifted = stroke(reachable_yaw(heading, lambda h: hand_at(canvas, *stroke(h)), ctx.reach_error))
+    yield Move(brush, canvas, over)
+    yield Move(brush, canvas, start, straight=True, slow=1.2)
+    yield Move(brush, canvas, end, straight=True, slow=1.5)
+    yield Move(brush, canvas, lifted, straight=True)
