@@ -35,13 +35,16 @@ def hand_yaw(T_world_hand: np.ndarray) -> float:
 def reachable_yaw(preferred: float, poses_at: Callable[[float], list[np.ndarray]],
                   reach_error: Callable[[list[np.ndarray]], float] | None, candidates: int = 16) -> float:
     """The yaw (rad) nearest ``preferred`` at which the arm reaches, one after the other,
-    the world poses of object 0 that ``poses_at(yaw)`` lists; ``preferred`` itself for the
-    floating hand (or when no candidate is reachable: the motion then shows where the arm
-    falls short)."""
+    the world poses of object 0 that ``poses_at(yaw)`` lists; where none is reached within
+    ``REACH_TOLERANCE_M``, the one it comes closest to. ``preferred`` itself for the
+    floating hand, which reaches every pose."""
     if reach_error is None:
         return preferred
     offsets = np.arange(candidates) * 2 * np.pi / candidates
-    for yaw in preferred + offsets[np.argsort(np.abs(np.angle(np.exp(1j * offsets))), kind="stable")]:
-        if reach_error(poses_at(float(yaw))) <= REACH_TOLERANCE_M:
+    yaws = preferred + offsets[np.argsort(np.abs(np.angle(np.exp(1j * offsets))), kind="stable")]
+    errors = []
+    for yaw in yaws:
+        errors.append(reach_error(poses_at(float(yaw))))
+        if errors[-1] <= REACH_TOLERANCE_M:
             return float(yaw)
-    return preferred
+    return float(yaws[int(np.argmin(errors))])
