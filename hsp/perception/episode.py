@@ -18,7 +18,7 @@ from hsp.errors import HspError
 from hsp.geometry.symmetry import z_folds
 from hsp.perception.initialize import initialize
 from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState
-from hsp.perception.tracker import FrameTracker, SurfaceModel, TrackerConfig, scene_points
+from hsp.perception.tracker import FrameTracker, SurfaceModel, TrackerConfig, follow, scene_points
 from hsp.recording.reader import Recording
 from hsp.sim.render import load_mesh
 from hsp.tasks.registry import Task
@@ -79,10 +79,5 @@ def track_recording(task: Task, rec: Recording, models: list[SurfaceModel], cfg:
     start = time.perf_counter()
     tracker = first_frame_tracker(task, rec.rgb[0], rec.depth[0], rec.K, rec.T_world_cam, models, cfg)
     first_frame = time.perf_counter() - start
-    n = len(models)
-    poses, status = np.zeros((len(rec.depth), n, 7)), np.zeros((len(rec.depth), n), np.int64)
-    for t in range(len(rec.depth)):
-        poses[t], status[t] = tracker.update(rec.rgb[t], rec.depth[t])
-        if progress is not None:
-            progress()
+    poses, status = follow(tracker, rec.rgb, rec.depth, progress)
     return TrackedEpisode(poses, status, time.perf_counter() - start, first_frame)

@@ -441,17 +441,23 @@ class FrameTracker:
         return pose_t, status_t
 
 
-def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, models: list[SurfaceModel],
-          start: np.ndarray, cfg: TrackerConfig = TrackerConfig(), found: np.ndarray | None = None,
-          redetect: Redetect | None = None, progress: Callable[[], None] | None = None,
-          rest: RestState | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Poses ``(T, n, 7)`` and status ``(T, n)`` over frames ``rgb (T, H, W, 3)``,
-    ``depth (T, H, W)``: :class:`FrameTracker` run over them."""
-    tracker = FrameTracker(K, T_world_cam, models, start, cfg, found, redetect, rest)
-    poses = np.zeros((len(depth), len(models), 7))
-    status = np.zeros((len(depth), len(models)), np.int64)
+def follow(tracker: FrameTracker, rgb: np.ndarray, depth: np.ndarray,
+           progress: Callable[[], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Poses ``(T, n, 7)`` and status ``(T, n)``: ``tracker`` updated with every frame of
+    ``rgb (T, H, W, 3)``, ``depth (T, H, W)`` in turn."""
+    n = len(tracker.models)
+    poses, status = np.zeros((len(depth), n, 7)), np.zeros((len(depth), n), np.int64)
     for t in range(len(depth)):
         poses[t], status[t] = tracker.update(rgb[t], depth[t])
         if progress is not None:
             progress()
     return poses, status
+
+
+def track(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, models: list[SurfaceModel],
+          start: np.ndarray, cfg: TrackerConfig = TrackerConfig(), found: np.ndarray | None = None,
+          redetect: Redetect | None = None, progress: Callable[[], None] | None = None,
+          rest: RestState | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Poses ``(T, n, 7)`` and status ``(T, n)`` over frames ``rgb (T, H, W, 3)``,
+    ``depth (T, H, W)``: a :class:`FrameTracker` from ``start`` :func:`follow`-ing them."""
+    return follow(FrameTracker(K, T_world_cam, models, start, cfg, found, redetect, rest), rgb, depth, progress)
