@@ -6,7 +6,10 @@
   sensor model, and the tracker that built the datasets estimates the poses online, frame
   by frame (:class:`~hsp.perception.tracker.FrameTracker`). The true poses only place the
   meshes in the rendered image; the tracker never reads them. As in the recordings, the
-  image shows the task's objects, not the arm.
+  image shows the task's objects, not the arm. The end effector e_t (object 0) is the one
+  pose a robot reads from its own joints rather than the camera: it comes from the arm's
+  forward kinematics, as on the paper's Kuka; the tracker still follows its mesh, since it
+  occludes and touches the objects.
 """
 
 from __future__ import annotations
@@ -59,8 +62,15 @@ class CameraObserver:
         rgb, depth = self._frame(true_poses)
         self.tracker = first_frame_tracker(self.task, rgb, depth, self.rig.camera.K, self.T_world_cam, self.models, self.cfg)
         poses, self.status = self.tracker.update(rgb, depth)
-        return poses
+        return self._proprioception(poses, true_poses)
 
     def observe(self, true_poses: np.ndarray) -> np.ndarray:
         poses, self.status = self.tracker.update(*self._frame(true_poses))
-        return poses
+        return self._proprioception(poses, true_poses)
+
+    @staticmethod
+    def _proprioception(tracked: np.ndarray, true_poses: np.ndarray) -> np.ndarray:
+        """Tracked poses with e_t, object 0, from the arm's forward kinematics."""
+        out = tracked.copy()
+        out[0] = true_poses[0]
+        return out

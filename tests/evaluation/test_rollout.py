@@ -20,6 +20,7 @@ def test_test_layouts_never_reuse_a_recording_seed():
 
 def test_wilson_interval_matches_the_closed_form():
     assert wilson_interval(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
+    assert wilson_interval(0, 250)[0] == 0.0 and wilson_interval(250, 250)[1] == 1.0
     assert wilson_interval(10, 10) == pytest.approx((0.7225, 1.0), abs=1e-4)
     low, high = wilson_interval(25, 50)
     assert low == pytest.approx(0.3664, abs=1e-4) and high == pytest.approx(0.6336, abs=1e-4)
