@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hsp.geometry import relative, rotvec_delta
-from hsp.labeling.priors import relative_poses
+from hsp.labeling.priors import pose_points, relative_poses
 
 FLAGS = 3
 """Per-object history flags: previous tool, previous target, target of an ended sub-task."""
@@ -65,6 +65,10 @@ class Steps:
     """a_t: the tool's step t → t+1 in the target's frame, same layout ``(H, 6)`` (zero at the end)."""
     labelled: np.ndarray
     """Frames whose tool and target are tracked ``(H,)`` bool: the only ones the losses use."""
+    decision: np.ndarray
+    """Frames where a way-point is chosen ``(H,)`` bool: the first, and every frame whose tool,
+    target or way-point differs from the frame before (the only frames π_m is trained on,
+    as the only ones where it is asked: see :class:`~hsp.policy.stepper.Stepper`)."""
     acted: np.ndarray
     """Frames whose step to t+1 is observed (both tracked at t and t+1) ``(H,)`` bool."""
 
@@ -78,10 +82,20 @@ def one_hot(index: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+ARM_M = 0.05
+"""A turn by θ counts as the arc ``ARM_M``·θ, about an object's radius, where a rotation
+and a translation are compared."""
+
+
 def remaining_way(current: np.ndarray, waypoint: np.ndarray) -> np.ndarray:
     """The step ``(..., 6)`` that takes pose ``current`` to ``waypoint`` (both in the target's
     frame): translation difference and rotation vector of R_w R_cur⁻¹, as actions are."""
     return rotvec_delta(current, waypoint)
+
+
+def way_length(step: np.ndarray) -> np.ndarray:
+    """Length ``(...)`` of steps ``(..., 6)``: the translation's, plus ``ARM_M`` times the angle."""
+    return np.linalg.norm(step[..., :3], axis=-1) + ARM_M * np.linalg.norm(step[..., 3:], axis=-1)
 
 
 def history_flags(tool: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
@@ -123,14 +137,51 @@ def memory_input(tool: np.ndarray, target: np.ndarray, waypoint: np.ndarray, cla
     return out
 
 
+def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray, still_m: float,
+              arm: float = ARM_M, half_window: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Labels ``(H,)`` each as a robot must act on them: a sub-task ends where its tool
+    arrives at its way-point, so the frames a demonstrator rested there before moving on are
+    given to the next sub-task (tool, target and way-point frame k), and marked ``waiting``.
+
+    Labels put a pause with the motion it ends; a robot that only switched where the
+    demonstrator did would wait at the way-point for a switch that nothing in its
+    observation announces (the next motion is what the switch causes). Here the switch comes
+    where g_t falls to zero. The tool is resting when its pose relative to the target, as a
+    point of R⁷ (:func:`~hsp.labeling.priors.pose_points`, turns counted at ``arm``), moves
+    less than ``still_m`` per frame over ``half_window`` frames either side. ``rel`` is
+    p_t[i, j] ``(H, n, n, 7)``. Returns tool, target, k and ``waiting`` (bool)."""
+    H = len(tool)
+    t = np.arange(H)
+    a, b = np.clip(t - half_window, 0, H - 1), np.clip(t + half_window, 0, H - 1)
+    span = np.maximum(b - a, 1)
+    step = np.linalg.norm(pose_points(rel[b, tool, target], arm) - pose_points(rel[a, tool, target], arm), axis=-1) / span
+    still = step < still_m
+    tool, target, k = tool.copy(), target.copy(), waypoint_index.copy()
+    waiting = np.zeros(H, bool)
+    change = np.flatnonzero((tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (k[1:] != k[:-1])) + 1
+    starts = np.concatenate([[0], change])
+    for s0, s in zip(starts[:-1], starts[1:]):
+        moving = np.flatnonzero(~still[s0:s])
+        arrive = s0 + (moving[-1] + 1 if moving.size else 1)  # first frame of the trailing rest, never the segment's first
+        if arrive < s:
+            tool[arrive:s], target[arrive:s], k[arrive:s] = tool[s], target[s], k[s]
+            waiting[arrive:s] = True
+    return tool, target, k, waiting
+
+
 def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, target: np.ndarray,
-                  waypoint_index: np.ndarray, classes: np.ndarray, n_classes: int) -> Steps:
+                  waypoint_index: np.ndarray, classes: np.ndarray, n_classes: int, still_m: float | None = None) -> Steps:
     """:class:`Steps` of one episode from canonical world poses ``(H, n, 7)``, whether each
     object is tracked ``(H, n)`` and its labels: tool, target and way-point frame k per frame
-    ``(H,)`` each (w_t = p_k[o+_t, o*_t])."""
+    ``(H,)`` each (w_t = p_k[o+_t, o*_t]). With ``still_m``, the labels are first turned
+    into the robot's decisions (:func:`decisions`); the steps of the frames spent waiting
+    for the next sub-task do not count as its actions."""
     H, n = world.shape[:2]
     t = np.arange(H)
     rel = relative_poses(world)  # (H, n, n, 7): p_t[i, j]
+    waiting = np.zeros(H, bool)
+    if still_m is not None:
+        tool, target, waypoint_index, waiting = decisions(rel, tool, target, waypoint_index, still_m)
     current = rel[t, tool, target]
     waypoint = rel[waypoint_index, tool, target]
     flags = history_flags(tool, target, n)
@@ -142,7 +193,9 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
     acted = np.zeros(H, bool)
     if H > 1:  # the same pair's relative pose one frame on, as the low level would have to command it
         action[:-1] = rotvec_delta(current[:-1], rel[t[1:], tool[:-1], target[:-1]])
-        acted[:-1] = labelled[:-1] & tracked[t[1:], tool[:-1]] & tracked[t[1:], target[:-1]]
+        acted[:-1] = labelled[:-1] & tracked[t[1:], tool[:-1]] & tracked[t[1:], target[:-1]] & ~waiting[:-1]
+    decision = np.ones(H, bool)
+    decision[1:] = (tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (waypoint_index[1:] != waypoint_index[:-1])
     f32 = np.float32
     return Steps(
         world=world.astype(f32), ee_in_object=rel[:, 0].astype(f32), tool_in_object=rel[t, tool].astype(f32),
@@ -151,7 +204,7 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         tracked=tracked.astype(bool), tool=tool.astype(np.int64), target=target.astype(np.int64),
         current=current.astype(f32), waypoint=waypoint.astype(f32),
         remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
-        labelled=labelled, acted=acted)
+        labelled=labelled, decision=decision, acted=acted)
 
 
 STEP_FIELDS = tuple(f.name for f in fields(Steps))

@@ -87,10 +87,11 @@ def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray])
     return out
 
 
-def labelled_steps(task: Task, world: list[np.ndarray], status: list[np.ndarray],
-                   labels: list[EpisodeLabels]) -> list[Steps]:
-    """Network inputs and targets of every episode (canonical poses, as the labels are);
-    frames where the labelled tool or target is lost do not count in the losses."""
+def labelled_steps(task: Task, world: list[np.ndarray], status: list[np.ndarray], labels: list[EpisodeLabels],
+                   still_m: float | None) -> list[Steps]:
+    """Network inputs and targets of every episode (canonical poses, as the labels are;
+    decided on arrival with ``still_m``, :func:`~hsp.policy.features.decisions`); frames
+    where the labelled tool or target is lost do not count in the losses."""
     classes, n_classes = semantic_classes(task)
     n = len(task.objects)
     out = []
@@ -98,7 +99,8 @@ def labelled_steps(task: Task, world: list[np.ndarray], status: list[np.ndarray]
         bad = (lab.target == 0) | (lab.target == lab.tool) | (lab.tool < 0) | (lab.tool >= n) | (lab.target >= n)
         if bad.any():
             raise HspError(f"labels name a (tool, target) pair that cannot be: {lab.tool[bad][0]}, {lab.target[bad][0]}")
-        out.append(episode_steps(w, st != TrackStatus.LOST, lab.tool, lab.target, lab.waypoint_index, classes, n_classes))
+        out.append(episode_steps(w, st != TrackStatus.LOST, lab.tool, lab.target, lab.waypoint_index, classes, n_classes,
+                                 still_m))
     return out
 
 
@@ -116,7 +118,7 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     else:
         labels = annotation_labels(task, recordings_dir, poses)  # type: ignore[arg-type]
     source = labels_file or recordings_dir
-    steps = labelled_steps(task, world, status, labels)
+    steps = labelled_steps(task, world, status, labels, cfg.still_m)
     classes, n_classes = semantic_classes(task)
     fit_on, held = split(len(steps), cfg.validation_every)
     log.info("train %s: %d episodes (%d frames) from %s and %s, %d more held out to validate", task.name, len(fit_on),
@@ -146,7 +148,7 @@ def em_fit(task: Task, policy: Policy, cfg: PriorConfig, train_cfg: TrainConfig,
         if given:
             return score_model(given.pop(), cfg)
         classes, n_classes = semantic_classes(task)
-        retrained, _ = train(labelled_steps(task, world, status, labels), task.names, classes, n_classes, train_cfg, seed)
+        retrained, _ = train(labelled_steps(task, world, status, labels, train_cfg.still_m), task.names, classes, n_classes, train_cfg, seed)
         return score_model(retrained, cfg)
 
     return fit

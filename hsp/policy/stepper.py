@@ -6,6 +6,12 @@ training builds from labels (:mod:`~hsp.policy.features`). Free-running validati
 it over held-out recordings; the closed-loop runner steps it on the robot's observations.
 Given ``forced`` choices (the labels), it reproduces the teacher-forced batch computation
 of training exactly (tested), so what is trained is what runs.
+
+A way-point holds until it is reached: π_m chooses w_t when the tool or target changes, or
+once the tool has rested within ``policy.arrive_m`` of w_{t−1} for ``policy.settle_frames``
+frames with π_h keeping the pair (π_h decides first whether the sub-task is over);
+otherwise w_t = w_{t−1}. This is how the labels are made (w is one pose per sub-task
+segment), and it keeps a way-point from drifting with the tool that follows it.
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hsp.policy.features import FLAGS, frame_observation, one_hot, remaining_way
+from hsp.policy.features import FLAGS, frame_observation, one_hot, remaining_way, way_length
 from hsp.geometry import normalize_quat, relative
 from hsp.policy.normalisation import Normalisation
 
@@ -44,6 +50,7 @@ class Stepper:
 
     def __init__(self, policy, batch: int = 1) -> None:
         self.net, self.norm = policy.net, policy.norm
+        self.arrive_m, self.settle_frames = policy.arrive_m, policy.settle_frames
         self.classes = np.asarray(policy.classes)
         self.C = int(policy.n_classes)
         self.n = len(self.classes)
@@ -55,6 +62,7 @@ class Stepper:
         self.prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # tool, target, w at t − 1
         self.prev2_pair: tuple[np.ndarray, np.ndarray] | None = None  # tool, target at t − 2
         self.ended = np.zeros((batch, self.n), np.float32)
+        self.rested = np.zeros(batch, np.int64)  # frames the tool has been at w_{t−1} with the pair kept
 
     def _history(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """LSTM input ``(B, 2C + 7)``, g_t ``(B, 7)`` and flags ``(B, n, 3)`` at this frame."""
@@ -113,6 +121,13 @@ class Stepper:
             w = np.concatenate([w[:, :3], normalize_quat(w[:, 3:].astype(np.float64))], -1).astype(np.float32)
             if forced is not None:
                 w = forced[2].astype(np.float32)
+            elif self.prev is not None:
+                same = (tool == self.prev[0]) & (target == self.prev[1])
+                at = way_length(remaining_way(current, self.prev[2])) < self.arrive_m
+                self.rested = np.where(same & at, self.rested + 1, 0)
+                hold = same & (self.rested < self.settle_frames)
+                self.rested[~hold] = 0
+                w = np.where(hold[:, None], self.prev[2], w)
             remaining = remaining_way(current, w).astype(np.float32)
             action, _ = net.pi_l(pair_classes, norm("current", f(current)), norm("waypoint", f(w)),
                                  norm("remaining", f(remaining)), f(remaining))

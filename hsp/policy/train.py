@@ -3,7 +3,9 @@
 L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
 
 * L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool;
-* L_w: mean squared error of π_m's way-point (standardised units, mean over the 7 numbers);
+* L_w: mean squared error of π_m's way-point (standardised units, mean over the 7 numbers),
+  on the frames where a way-point is chosen (the way-point holds until reached, so those
+  are the only frames where π_m is asked; elsewhere copying w_{t−1} would be all it learnt);
 * L_action: −log π_l(a_t), the action in units of its spread in the data;
 * L_mem: ‖M(h_t) − M(h_{t−1})‖₂ where the tool, target and way-point did not change (h_t
   then holds nothing that h_{t−1} did not: the last entry repeats the one before);
@@ -60,6 +62,16 @@ class TrainConfig:
     checkpoint_every: int = 1000
     """Iterations between free-running validations; the best checkpoint on the held-out
     episodes is kept (the last iterate when nothing is held out)."""
+    arrive_m: float = 0.002
+    """Running, the tool has reached its way-point when the remaining way is shorter than
+    this (translation plus 0.05 m × angle) ..."""
+    settle_frames: int = 3
+    """... and once it has rested there this many frames with π_h keeping the pair, π_m
+    chooses the next one (π_h, which ends sub-tasks, decides first)."""
+    still_m: float = 0.002
+    """A tool moving less than this per frame relative to its target has arrived at its
+    way-point: the next sub-task is decided there (:func:`~hsp.policy.features.decisions`);
+    tracking jitter is under 1 mm per frame."""
 
 
 @dataclass
@@ -72,6 +84,9 @@ class Policy:
     classes: np.ndarray
     """Semantic label index of each object ``(n,)``."""
     n_classes: int
+    arrive_m: float = TrainConfig.arrive_m
+    settle_frames: int = TrainConfig.settle_frames
+    """Way-points are held until reached: :class:`~hsp.policy.stepper.Stepper`."""
 
 
 def batch(episodes: list[Steps], idx: list[int]) -> dict[str, torch.Tensor]:
@@ -138,7 +153,7 @@ def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
     ret = (-(torch.log_softmax(r[..., :C], -1) * previous[..., :C]).sum(-1)
            - (torch.log_softmax(r[..., C:2 * C], -1) * previous[..., C:2 * C]).sum(-1)
            + ((r[..., 2 * C:] - norm("waypoint", previous[..., 2 * C:])) ** 2).mean(-1))
-    return {"tool": _mean(tool_nll, labelled), "target": _mean(target_nll, labelled), "waypoint": _mean(w_err, labelled),
+    return {"tool": _mean(tool_nll, labelled), "target": _mean(target_nll, labelled), "waypoint": _mean(w_err, labelled & b["decision"]),
             "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
 
 
@@ -218,7 +233,8 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     net = Hierarchy(Sizes(len(objects), n_classes, cfg.hidden, cfg.memory))
-    policy = Policy(net, Normalisation.fit(episodes), objects, np.asarray(classes), n_classes)
+    policy = Policy(net, Normalisation.fit(episodes), objects, np.asarray(classes), n_classes, cfg.arrive_m,
+                    cfg.settle_frames)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     lengths = np.array([len(e) for e in episodes])
     report: dict[str, float] = {}
@@ -243,7 +259,8 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     if best is not None:
         net.load_state_dict(best[2])
         report |= {"checkpoint_iteration": best[1]} | {f"validation_{k}": v for k, v in best[3].items()}
-    return Policy(net.eval(), policy.norm, objects, np.asarray(classes), n_classes), report
+    return Policy(net.eval(), policy.norm, objects, np.asarray(classes), n_classes, cfg.arrive_m,
+                    cfg.settle_frames), report
 
 
 def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
@@ -255,7 +272,8 @@ def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
         tensors |= {f"norm.{k}": v for k, v in policy.norm.stats.items()}
         save_file(tensors, tmp / "model.safetensors")
         config = {"format": FORMAT, "train": asdict(cfg), "sizes": asdict(policy.net.sizes), "objects": policy.objects,
-                  "classes": policy.classes.tolist(), "n_classes": policy.n_classes}
+                  "classes": policy.classes.tolist(), "n_classes": policy.n_classes, "arrive_m": policy.arrive_m,
+                  "settle_frames": policy.settle_frames}
         (tmp / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
 
@@ -273,7 +291,8 @@ def load(model_dir: Path) -> Policy:
         net = Hierarchy(Sizes(**config["sizes"]))
         net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
         norm = Normalisation({k[5:]: v for k, v in tensors.items() if k.startswith("norm.")})
-        return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"])
+        return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"],
+                      config["arrive_m"], config["settle_frames"])
     except (SafetensorError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise HspError(f"{model_dir}: not a trained policy of this hsp version (retrain with `hsp train`): {first}") from None

@@ -44,7 +44,8 @@ def test_each_loss_term_has_its_hand_computed_value():
     # π_h uniform: the tool among 3 objects; the target among the 2 (tool = ee) or 1 (tool = a) allowed
     assert got["tool"] == pytest.approx(np.log(3), abs=1e-5)
     assert got["target"] == pytest.approx(np.mean(np.where(s.tool == 0, np.log(2), 0.0)), abs=1e-5)
-    assert got["waypoint"] == pytest.approx(np.mean(std("waypoint", s.waypoint) ** 2), rel=1e-4)
+    assert got["waypoint"] == pytest.approx(np.mean(std("waypoint", s.waypoint[s.decision]) ** 2), rel=1e-4)
+    assert 1 < s.decision.sum() < len(s) / 4
     scale = norm.stats["action.std"].numpy()
     z = (s.action - 0.5 * s.remaining) / scale
     assert got["action"] == pytest.approx(np.mean((0.5 * z * z + LOG_SQRT_2PI).sum(1)[s.acted]), rel=1e-4)
