@@ -1,7 +1,7 @@
 """Benchmark: training π_h, π_m, π_l — time per iteration and peak memory.
 
 Synthetic episodes (random-walk poses, labels from the priors), so it runs without the
-pipeline's data. The paper's 20,000 iterations take about 11–13 minutes a task here.
+pipeline's data. Gradient steps only (no held-out episodes, so no free-running checkpoints).
 Run: ``python bench/train_speed.py [--episodes 32] [--frames 400] [--objects 6] [--iterations 200] [--repeats 3]``.
 """
 
@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from hsp.labeling.label import label_episode
-from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
+from hsp.labeling.priors import PriorConfig
 from hsp.policy.features import episode_steps
 from hsp.policy.train import TrainConfig, train
 
@@ -37,8 +37,9 @@ def main() -> None:
     for e in range(args.episodes):
         world = random_walk(args.frames, n, e)
         lab = label_episode(world, np.zeros((args.frames, n), int), PriorConfig())
-        steps.append(episode_steps(world, pair_indices(pairs_of(n), lab.tool, lab.target), lab.waypoint_index, classes, n))
-    cfg = TrainConfig(iterations=args.iterations)
+        steps.append(episode_steps(world, np.ones((args.frames, n), bool), lab.tool, lab.target, lab.waypoint_index,
+                                   classes, n))
+    cfg = TrainConfig(iterations=args.iterations, checkpoint_every=args.iterations)
     times = []
     for _ in range(args.repeats):
         start = time.perf_counter()

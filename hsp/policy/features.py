@@ -1,88 +1,216 @@
-"""What the three networks see and predict, per frame of one labelled episode (paper, Section III).
+"""What the three networks see and predict, per frame of one labelled episode (paper, Sections III, IV-C).
 
-Everything is relative: the observation z_t is p_t[i, j] for every (tool, target) pair, so
-a policy does not depend on where the layout put the objects. Poses are ``[x, y, z, qx,
-qy, qz, qw]`` with canonical orientations of symmetric objects (as the labels use).
+The observation z_t = (e_t, semantic labels, p_t) is laid out per object, so that π_h
+scores every object with the same weights and identical objects (the four lug nuts) are
+interchangeable whatever order the tracker numbered them in. The history h_t enters three
+ways, each a function of the past tools, targets and way-points (o+_k, o*_k, w_k)_{k<t}:
+
+* the LSTM reads, per frame, the semantic labels of o+_{t−1} and o*_{t−1} and w_{t−1}
+  (labels rather than object indices, for the same interchangeability);
+* per object, whether it was the previous tool, the previous target, and whether it was
+  the target of a sub-task that has ended (:func:`history_flags`);
+* per semantic label, the fraction of its objects that were such targets (how many nuts
+  are done).
+
+Poses are ``[x, y, z, qx, qy, qz, qw]`` with canonical orientations of symmetric objects
+(as the labels use). Everything here takes arrays and returns arrays; the closed-loop
+runner builds the same features from its own choices.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from hsp.geometry import inverse, rotvec_delta
-from hsp.labeling.priors import pairs_of, relative_poses
+from hsp.geometry import relative, rotvec_delta
+from hsp.labeling.priors import pose_points, relative_poses
+
+FLAGS = 3
+"""Per-object history flags: previous tool, previous target, target of an ended sub-task."""
 
 
 @dataclass
 class Steps:
-    """One episode of ``H`` frames, every array float32 except ``pair``."""
+    """One episode of ``H`` frames with ``n`` objects and ``C`` semantic labels; float32
+    arrays except the indices and masks."""
 
-    z: np.ndarray
-    """z_t: p_t[i, j] of all ``P`` pairs, flattened ``(H, 7P)``."""
+    world: np.ndarray
+    """Every object's world pose ``(H, n, 7)``; object 0 is the end-effector, e_t."""
+    ee_in_object: np.ndarray
+    """p_t[0, j]: the end-effector in each object's frame ``(H, n, 7)``."""
+    tool_in_object: np.ndarray
+    """p_t[o+_t, j]: the labelled tool in each object's frame ``(H, n, 7)`` (π_h's target head)."""
+    flags: np.ndarray
+    """Per-object history flags ``(H, n, 3)`` (:func:`history_flags`)."""
+    done: np.ndarray
+    """Per semantic label, the fraction of its objects that were targets of ended sub-tasks ``(H, C)``."""
     history: np.ndarray
-    """What the LSTM reads at t: the previous pair (one-hot) and way-point w_{t−1} ``(H, P + 7)``."""
+    """What the LSTM reads at t: labels of o+_{t−1} and o*_{t−1} (one-hot each) and w_{t−1} ``(H, 2C + 7)``."""
     progress: np.ndarray
     """g_t = p_t[o+_{t−1}, o*_{t−1}] − w_{t−1} ``(H, 7)`` (zero at t = 0)."""
-    pair: np.ndarray
-    """(o+_t, o*_t) as an index into :func:`~hsp.labeling.priors.pairs_of` ``(H,)``."""
-    classes: np.ndarray
-    """Semantic labels of the pair's tool and target, one-hot each ``(H, 2C)``."""
+    tracked: np.ndarray
+    """Whether each object is tracked at t ``(H, n)`` bool."""
+    tool: np.ndarray
+    """o+_t ``(H,)`` int64."""
+    target: np.ndarray
+    """o*_t ``(H,)`` int64."""
     current: np.ndarray
-    """p_t[o+_t, o*_t] ``(H, 7)``: the tool in the target's frame."""
-    target_in_tool: np.ndarray
-    """The target in the tool's frame ``(H, 7)`` (π_l's input)."""
+    """p_t[o+_t, o*_t]: the tool in the target's frame ``(H, 7)``."""
     waypoint: np.ndarray
-    """w_t ``(H, 7)``."""
+    """w_t ``(H, 7)``, in the target's frame."""
+    remaining: np.ndarray
+    """The way from p_t[o+, o*] to w_t, translation and rotation vector in the target's frame ``(H, 6)``."""
     action: np.ndarray
-    """a_t: the tool's step t → t+1 in the target's frame, translation and rotation vector ``(H, 6)`` (zero at the end)."""
+    """a_t: the tool's step t → t+1 in the target's frame, same layout ``(H, 6)`` (zero at the end)."""
+    labelled: np.ndarray
+    """Frames whose tool and target are tracked ``(H,)`` bool: the only ones the losses use."""
+    decision: np.ndarray
+    """Frames where a way-point is chosen ``(H,)`` bool: the first, and every frame whose tool,
+    target or way-point differs from the frame before (the only frames π_m is trained on,
+    as the only ones where it is asked: see :class:`~hsp.policy.stepper.Stepper`)."""
+    acted: np.ndarray
+    """Frames whose step to t+1 is observed (both tracked at t and t+1) ``(H,)`` bool."""
+
+    def __len__(self) -> int:
+        return len(self.tool)
 
 
-def class_codes(classes: np.ndarray, n_classes: int, pairs: np.ndarray) -> np.ndarray:
-    """One-hot semantic labels of each pair's tool and target ``(P, 2C)``."""
-    out = np.zeros((len(pairs), 2 * n_classes), np.float32)
-    rows = np.arange(len(pairs))
-    out[rows, classes[pairs[:, 0]]] = 1.0
-    out[rows, n_classes + classes[pairs[:, 1]]] = 1.0
+def one_hot(index: np.ndarray, n: int) -> np.ndarray:
+    out = np.zeros(index.shape + (n,), np.float32)
+    np.put_along_axis(out, index[..., None], 1.0, axis=-1)
     return out
 
 
-def pair_poses(world: np.ndarray) -> np.ndarray:
-    """p_t[i, j] of every pair of :func:`~hsp.labeling.priors.pairs_of` ``(H, P, 7)``."""
-    pairs = pairs_of(world.shape[1])
-    return relative_poses(world)[:, pairs[:, 0], pairs[:, 1]]
+ARM_M = 0.05
+"""A turn by θ counts as the arc ``ARM_M``·θ, about an object's radius, where a rotation
+and a translation are compared."""
 
 
-def memory_inputs(rel: np.ndarray, pair: np.ndarray, waypoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The LSTM's input (previous pair one-hot, w_{t−1}) and g_t, ``(H, P + 7)`` and
-    ``(H, 7)``, from the pairs' poses ``rel`` ``(H, P, 7)`` and labels ``pair`` ``(H,)``,
-    ``waypoint`` ``(H, 7)``, shifted one frame."""
-    H, P = rel.shape[:2]
-    history = np.zeros((H, P + 7), np.float32)
-    progress = np.zeros((H, 7), np.float32)
+def remaining_way(current: np.ndarray, waypoint: np.ndarray) -> np.ndarray:
+    """The step ``(..., 6)`` that takes pose ``current`` to ``waypoint`` (both in the target's
+    frame): translation difference and rotation vector of R_w R_cur⁻¹, as actions are."""
+    return rotvec_delta(current, waypoint)
+
+
+def way_length(step: np.ndarray) -> np.ndarray:
+    """Length ``(...)`` of steps ``(..., 6)``: the translation's, plus ``ARM_M`` times the angle."""
+    return np.linalg.norm(step[..., :3], axis=-1) + ARM_M * np.linalg.norm(step[..., 3:], axis=-1)
+
+
+def history_flags(tool: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
+    """Per frame t and object j, from the tools and targets before t ``(H,)`` each: j was
+    o+_{t−1}; j was o*_{t−1}; j was the target of a sub-task (a run of one pair) that
+    ended before t. ``(H, n, 3)`` float32, zero at t = 0."""
+    H = len(tool)
+    out = np.zeros((H, n, FLAGS), np.float32)
+    if H < 2:
+        return out
+    t = np.arange(1, H)
+    out[t, tool[:-1], 0] = 1.0
+    out[t, target[:-1], 1] = 1.0
+    switch = np.flatnonzero((tool[1:] != tool[:-1]) | (target[1:] != target[:-1])) + 1  # pair at s differs from s−1
+    switch = switch[switch + 1 < H]  # the history shows the new pair from t = s + 1 on
+    ended = np.zeros((H, n), np.float32)
+    ended[switch + 1, target[switch - 1]] = 1.0
+    out[:, :, 2] = np.maximum.accumulate(ended, axis=0)
+    return out
+
+
+def done_fractions(flags: np.ndarray, classes: np.ndarray, n_classes: int) -> np.ndarray:
+    """Per frame and semantic label, the fraction of its objects flagged as targets of
+    ended sub-tasks ``(H, C)``."""
+    members = one_hot(classes, n_classes)  # (n, C)
+    return (flags[..., 2] @ members) / np.maximum(members.sum(0), 1.0)
+
+
+def memory_input(tool: np.ndarray, target: np.ndarray, waypoint: np.ndarray, classes: np.ndarray,
+                 n_classes: int) -> np.ndarray:
+    """The LSTM's input at every frame ``(H, 2C + 7)``: labels of the previous tool and
+    target, one-hot each, and w_{t−1}; zero at t = 0."""
+    H = len(tool)
+    out = np.zeros((H, 2 * n_classes + 7), np.float32)
     if H > 1:
-        history[np.arange(1, H), pair[:-1]] = 1.0
-        history[1:, P:] = waypoint[:-1]
-        progress[1:] = rel[np.arange(1, H), pair[:-1]] - waypoint[:-1]
-    return history, progress
+        out[1:, :n_classes] = one_hot(classes[tool[:-1]], n_classes)
+        out[1:, n_classes:2 * n_classes] = one_hot(classes[target[:-1]], n_classes)
+        out[1:, 2 * n_classes:] = waypoint[:-1]
+    return out
 
 
-def episode_steps(world: np.ndarray, pair: np.ndarray, waypoint_index: np.ndarray, classes: np.ndarray,
-                  n_classes: int) -> Steps:
-    """:class:`Steps` of one episode from canonical world poses ``(H, n, 7)`` and its labels:
-    pair index per frame ``(H,)`` and way-point frame k ``(H,)`` (w_t = p_k[o+_t, o*_t])."""
-    H, n = world.shape[:2]
-    pairs = pairs_of(n)
-    rel = pair_poses(world)
+def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray, still_m: float,
+              arm: float = ARM_M, half_window: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Labels ``(H,)`` each as a robot must act on them: a sub-task ends where its tool
+    arrives at its way-point, so the frames a demonstrator rested there before moving on are
+    given to the next sub-task (tool, target and way-point frame k), and marked ``waiting``.
+
+    Labels put a pause with the motion it ends; a robot that only switched where the
+    demonstrator did would wait at the way-point for a switch that nothing in its
+    observation announces (the next motion is what the switch causes). Here the switch comes
+    where g_t falls to zero. The tool is resting when its pose relative to the target, as a
+    point of R⁷ (:func:`~hsp.labeling.priors.pose_points`, turns counted at ``arm``), moves
+    less than ``still_m`` per frame over ``half_window`` frames either side. ``rel`` is
+    p_t[i, j] ``(H, n, n, 7)``. Returns tool, target, k and ``waiting`` (bool)."""
+    H = len(tool)
     t = np.arange(H)
-    current = rel[t, pair]
-    waypoint = rel[waypoint_index, pair]
-    history, progress = memory_inputs(rel, pair, waypoint)
+    a, b = np.clip(t - half_window, 0, H - 1), np.clip(t + half_window, 0, H - 1)
+    span = np.maximum(b - a, 1)
+    step = np.linalg.norm(pose_points(rel[b, tool, target], arm) - pose_points(rel[a, tool, target], arm), axis=-1) / span
+    still = step < still_m
+    tool, target, k = tool.copy(), target.copy(), waypoint_index.copy()
+    waiting = np.zeros(H, bool)
+    change = np.flatnonzero((tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (k[1:] != k[:-1])) + 1
+    starts = np.concatenate([[0], change])
+    for s0, s in zip(starts[:-1], starts[1:]):
+        moving = np.flatnonzero(~still[s0:s])
+        arrive = s0 + (moving[-1] + 1 if moving.size else 1)  # first frame of the trailing rest, never the segment's first
+        if arrive < s:
+            tool[arrive:s], target[arrive:s], k[arrive:s] = tool[s], target[s], k[s]
+            waiting[arrive:s] = True
+    return tool, target, k, waiting
+
+
+def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, target: np.ndarray,
+                  waypoint_index: np.ndarray, classes: np.ndarray, n_classes: int, still_m: float | None = None) -> Steps:
+    """:class:`Steps` of one episode from canonical world poses ``(H, n, 7)``, whether each
+    object is tracked ``(H, n)`` and its labels: tool, target and way-point frame k per frame
+    ``(H,)`` each (w_t = p_k[o+_t, o*_t]). With ``still_m``, the labels are first turned
+    into the robot's decisions (:func:`decisions`); the steps of the frames spent waiting
+    for the next sub-task do not count as its actions."""
+    H, n = world.shape[:2]
+    t = np.arange(H)
+    rel = relative_poses(world)  # (H, n, n, 7): p_t[i, j]
+    waiting = np.zeros(H, bool)
+    if still_m is not None:
+        tool, target, waypoint_index, waiting = decisions(rel, tool, target, waypoint_index, still_m)
+    current = rel[t, tool, target]
+    waypoint = rel[waypoint_index, tool, target]
+    flags = history_flags(tool, target, n)
+    progress = np.zeros((H, 7))
+    if H > 1:
+        progress[1:] = rel[t[1:], tool[:-1], target[:-1]] - waypoint[:-1]
     action = np.zeros((H, 6))
-    if H > 1:  # the step of the same pair's relative pose, as the low level would have to command it
-        action[:-1] = rotvec_delta(current[:-1], rel[t[1:], pair[:-1]])
+    labelled = tracked[t, tool] & tracked[t, target]
+    acted = np.zeros(H, bool)
+    if H > 1:  # the same pair's relative pose one frame on, as the low level would have to command it
+        action[:-1] = rotvec_delta(current[:-1], rel[t[1:], tool[:-1], target[:-1]])
+        acted[:-1] = labelled[:-1] & tracked[t[1:], tool[:-1]] & tracked[t[1:], target[:-1]] & ~waiting[:-1]
+    decision = np.ones(H, bool)
+    decision[1:] = (tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (waypoint_index[1:] != waypoint_index[:-1])
     f32 = np.float32
-    return Steps(rel.reshape(H, -1).astype(f32), history, progress, pair.astype(np.int64),
-                 class_codes(classes, n_classes, pairs)[pair], current.astype(f32), inverse(current).astype(f32),
-                 waypoint.astype(f32), action.astype(f32))
+    return Steps(
+        world=world.astype(f32), ee_in_object=rel[:, 0].astype(f32), tool_in_object=rel[t, tool].astype(f32),
+        flags=flags, done=done_fractions(flags, classes, n_classes),
+        history=memory_input(tool, target, waypoint, classes, n_classes), progress=progress.astype(f32),
+        tracked=tracked.astype(bool), tool=tool.astype(np.int64), target=target.astype(np.int64),
+        current=current.astype(f32), waypoint=waypoint.astype(f32),
+        remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
+        labelled=labelled, decision=decision, acted=acted)
+
+
+STEP_FIELDS = tuple(f.name for f in fields(Steps))
+
+
+def frame_observation(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What the closed-loop runner observes of one frame ``(n, 7)``: world poses and the
+    end-effector in each object's frame ``(n, 7)`` each."""
+    return world.astype(np.float32), relative(np.repeat(world[:1], len(world), 0), world).astype(np.float32)

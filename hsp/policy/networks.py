@@ -1,16 +1,24 @@
-"""The three networks of the paper (Section III; sizes of Section V-C).
+"""The three networks of the paper (Section III; sizes of Section V-C) and the retrieval head of L_ret.
 
-* π_h: g_t → FC(64)+ReLU; the history (previous pair, w_{t−1}) → LSTM(32); [z_t, LSTM,
-  embedded g_t] → two hidden layers of 64 → log-softmax over the P (tool, target) pairs
-  (one head over the pairs the labels can take, rather than separate tool and target heads:
-  the target is never the end-effector or the tool itself).
-* π_m: the pair's semantic labels, p_t[o+, o*], the LSTM state and g_t → two hidden
-  layers of 64 → a diagonal Gaussian over the way-point w_t (7).
-* π_l: the target in the tool's frame, w_t and the pair's labels → two hidden layers of 64
-  → a diagonal Gaussian over the action a_t (6).
+* Memory: an LSTM(32) over the history input (labels of o+_{t−1}, o*_{t−1} and w_{t−1});
+  its output M(h_t), g_t embedded by FC(64)+ReLU, e_t and the per-label done fractions
+  form the context every level reads.
+* π_h: two softmax heads, tool and target (the paper's L_o+ and L_o*). Each scores every
+  object with one MLP (two hidden layers of 64) from that object's features (semantic
+  label, world pose, the end-effector in its frame, history flags, tracked) and the
+  context, so identical objects are interchangeable. The target head also reads the tool
+  in the candidate's frame and the tool's label; the end-effector and the tool itself are
+  never targets.
+* π_m: the pair's labels and history flags, p_t[o+, o*] and the context → two hidden
+  layers of 64 → w_t (7), trained by mean squared error (L_w).
+* π_l: the pair's labels, p_t[o+, o*], w_t and the remaining way from one to the other →
+  two hidden layers of 64 → a diagonal Gaussian over a_t. Its mean is a per-axis fraction
+  (0 to 1) of the remaining way: the step always heads for w_t and vanishes there, so the
+  low level is a stable controller in closed loop, whatever its small errors.
+* Retrieval (L_ret): from M(h_t), the labels of o+_{t−1} and o*_{t−1} and w_{t−1}.
 
-Inputs and outputs are standardised with statistics of the training data
-(:class:`Normalisation`); log-likelihoods are in those standardised units.
+Inputs are standardised (:class:`~hsp.policy.normalisation.Normalisation`); π_l's action
+is in physical units scaled per axis by the data's spread.
 """
 
 from __future__ import annotations
@@ -19,6 +27,8 @@ from dataclasses import dataclass
 
 import torch
 from torch import nn
+
+from hsp.policy.features import FLAGS
 
 LOG_STD_RANGE = (-5.0, 2.0)
 LOG_SQRT_2PI = 0.9189385332046727
@@ -34,16 +44,37 @@ def gaussian_log_prob(mean: torch.Tensor, log_std: torch.Tensor, x: torch.Tensor
     return (-0.5 * z * z - log_std - LOG_SQRT_2PI).sum(-1)
 
 
+class ObjectScorer(nn.Module):
+    """One logit per object from its features ``(..., n, F)`` and a shared context
+    ``(..., D)``: an MLP on their concatenation, its first layer split so that the
+    context's part is computed once per frame rather than once per object."""
+
+    def __init__(self, d_object: int, d_context: int, hidden: int) -> None:
+        super().__init__()
+        self.object_in = nn.Linear(d_object, hidden)
+        self.context_in = nn.Linear(d_context, hidden, bias=False)
+        self.rest = nn.Sequential(nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+
+    def forward(self, objects: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
+        return self.rest(self.object_in(objects) + self.context_in(context).unsqueeze(-2))[..., 0]
+
+
 @dataclass(frozen=True)
 class Sizes:
-    pairs: int
+    objects: int
     classes: int
     hidden: int = 64
     memory: int = 32
 
     @property
-    def z(self) -> int:
-        return 7 * self.pairs
+    def object_features(self) -> int:
+        """Label, world pose, end-effector in the object's frame, flags, tracked."""
+        return self.classes + 7 + 7 + FLAGS + 1
+
+    @property
+    def context(self) -> int:
+        """e_t, M(h_t), embedded g_t, done fractions."""
+        return 7 + self.memory + self.hidden + self.classes
 
 
 class Hierarchy(nn.Module):
@@ -52,28 +83,43 @@ class Hierarchy(nn.Module):
     def __init__(self, sizes: Sizes) -> None:
         super().__init__()
         s = self.sizes = sizes
+        C = s.classes
         self.progress = nn.Sequential(nn.Linear(7, s.hidden), nn.ReLU())
-        self.memory = nn.LSTM(s.pairs + 7, s.memory, batch_first=True)
-        self.high = mlp(s.z + s.memory + s.hidden, s.pairs, s.hidden)
-        self.intermediate = mlp(2 * s.classes + 7 + s.memory + 7, 14, s.hidden)
-        self.low = mlp(7 + 7 + 2 * s.classes, 12, s.hidden)
+        self.memory = nn.LSTM(2 * C + 7, s.memory, batch_first=True)
+        self.tool_head = ObjectScorer(s.object_features, s.context, s.hidden)
+        self.target_head = ObjectScorer(s.object_features + 7, C + s.context, s.hidden)
+        self.intermediate = mlp(2 * C + 7 + 2 * FLAGS + s.context, 7, s.hidden)
+        self.low = mlp(2 * C + 7 + 7 + 6, 12, s.hidden)
+        self.retrieve = nn.Linear(s.memory, 2 * C + 7)
 
-    def remember(self, history: torch.Tensor) -> torch.Tensor:
-        """LSTM states over an episode batch ``(B, T, P + 7)`` → ``(B, T, memory)``."""
-        return self.memory(history)[0]
+    def remember(self, history: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None
+                 ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+        """M(h_t) over a batch ``(B, T, 2C + 7)`` → ``(B, T, memory)``, and the LSTM state after it."""
+        return self.memory(history, state)
 
-    def pi_h(self, z: torch.Tensor, memory: torch.Tensor, progress: torch.Tensor) -> torch.Tensor:
-        """log π_h over pairs ``(..., P)``."""
-        return torch.log_softmax(self.high(torch.cat([z, memory, self.progress(progress)], -1)), -1)
+    def context(self, ee: torch.Tensor, memory: torch.Tensor, progress: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
+        return torch.cat([ee, memory, self.progress(progress), done], -1)
 
-    def pi_m(self, classes: torch.Tensor, current: torch.Tensor, memory: torch.Tensor,
-             progress: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean and log-σ of the way-point ``(..., 7)`` each."""
-        out = self.intermediate(torch.cat([classes, current, memory, progress], -1))
-        return out[..., :7], out[..., 7:].clamp(*LOG_STD_RANGE)
+    def pi_tool(self, objects: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
+        """log π_h(o+) over objects ``(..., n)`` from per-object features ``(..., n, F)``."""
+        return torch.log_softmax(self.tool_head(objects, context), -1)
 
-    def pi_l(self, target_in_tool: torch.Tensor, waypoint: torch.Tensor,
-             classes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean and log-σ of the action ``(..., 6)`` each."""
-        out = self.low(torch.cat([target_in_tool, waypoint, classes], -1))
-        return out[..., :6], out[..., 6:].clamp(*LOG_STD_RANGE)
+    def pi_target(self, objects: torch.Tensor, tool_in_object: torch.Tensor, tool_class: torch.Tensor,
+                  context: torch.Tensor, tool: torch.Tensor) -> torch.Tensor:
+        """log π_h(o* | o+) over objects ``(..., n)``; the end-effector and ``tool`` get −inf."""
+        n = objects.shape[-2]
+        logits = self.target_head(torch.cat([objects, tool_in_object], -1), torch.cat([tool_class, context], -1))
+        index = torch.arange(n)
+        barred = (index == 0) | (index == tool.unsqueeze(-1))
+        return torch.log_softmax(logits.masked_fill(barred, float("-inf")), -1)
+
+    def pi_m(self, classes: torch.Tensor, current: torch.Tensor, flags: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
+        """The way-point w_t ``(..., 7)``, standardised."""
+        return self.intermediate(torch.cat([classes, current, flags, context], -1))
+
+    def pi_l(self, classes: torch.Tensor, current: torch.Tensor, waypoint: torch.Tensor, remaining: torch.Tensor,
+             remaining_raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean (physical units, a fraction of ``remaining_raw`` per axis) and log-σ (in the
+        action's scaled units) of a_t ``(..., 6)`` each; the other inputs are standardised."""
+        out = self.low(torch.cat([classes, current, waypoint, remaining], -1))
+        return torch.sigmoid(out[..., :6]) * remaining_raw, out[..., 6:].clamp(*LOG_STD_RANGE)

@@ -17,11 +17,11 @@ from hsp.errors import HspError
 from hsp.labeling.em import Fit, ScoreModel, em_label
 from hsp.geometry import relative
 from hsp.labeling.label import EpisodeLabels, canonical_poses, prepared_poses
-from hsp.labeling.priors import PriorConfig, pair_indices, pairs_of
+from hsp.labeling.priors import PriorConfig
 from hsp.labeling.stage import WAYPOINT_COLUMNS
 from hsp.policy.features import Steps, episode_steps
 from hsp.policy.scores import PolicyScores
-from hsp.policy.train import Policy, TrainConfig, save, split, train, validate
+from hsp.policy.train import Policy, TrainConfig, save, split, train
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
@@ -87,16 +87,20 @@ def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray])
     return out
 
 
-def labelled_steps(task: Task, world: list[np.ndarray], labels: list[EpisodeLabels]) -> list[Steps]:
-    """Network inputs and targets of every episode (canonical poses, as the labels are)."""
+def labelled_steps(task: Task, world: list[np.ndarray], status: list[np.ndarray], labels: list[EpisodeLabels],
+                   still_m: float | None) -> list[Steps]:
+    """Network inputs and targets of every episode (canonical poses, as the labels are;
+    decided on arrival with ``still_m``, :func:`~hsp.policy.features.decisions`); frames
+    where the labelled tool or target is lost do not count in the losses."""
     classes, n_classes = semantic_classes(task)
-    pairs = pairs_of(len(task.objects))
+    n = len(task.objects)
     out = []
-    for w, lab in zip(world, labels):
-        pair = pair_indices(pairs, lab.tool, lab.target)
-        if (pair < 0).any():
-            raise HspError(f"labels name a (tool, target) pair that cannot be: {lab.tool[pair < 0][0]}, {lab.target[pair < 0][0]}")
-        out.append(episode_steps(w, pair, lab.waypoint_index, classes, n_classes))
+    for w, st, lab in zip(world, status, labels):
+        bad = (lab.target == 0) | (lab.target == lab.tool) | (lab.tool < 0) | (lab.tool >= n) | (lab.target >= n)
+        if bad.any():
+            raise HspError(f"labels name a (tool, target) pair that cannot be: {lab.tool[bad][0]}, {lab.target[bad][0]}")
+        out.append(episode_steps(w, st != TrackStatus.LOST, lab.tool, lab.target, lab.waypoint_index, classes, n_classes,
+                                 still_m))
     return out
 
 
@@ -107,27 +111,23 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     if (labels_file is None) == (recordings_dir is None):
         raise HspError("train: give either a labels file or the recordings with the annotation")
     start = time.perf_counter()
-    poses, _status, _ = load_episodes(dataset_dir, task.name, task.names)
+    poses, status, _ = load_episodes(dataset_dir, task.name, task.names)
     world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
     if labels_file is not None:
         labels = read_labels(labels_file, [len(p) for p in poses])
     else:
         labels = annotation_labels(task, recordings_dir, poses)  # type: ignore[arg-type]
     source = labels_file or recordings_dir
-    steps = labelled_steps(task, world, labels)
+    steps = labelled_steps(task, world, status, labels, cfg.still_m)
     classes, n_classes = semantic_classes(task)
     fit_on, held = split(len(steps), cfg.validation_every)
     log.info("train %s: %d episodes (%d frames) from %s and %s, %d more held out to validate", task.name, len(fit_on),
-             sum(len(steps[i].pair) for i in fit_on), dataset_dir, source, len(held))
-    policy, last = train([steps[i] for i in fit_on], task.names, classes, n_classes, cfg, seed)
+             sum(len(steps[i]) for i in fit_on), dataset_dir, source, len(held))
+    policy, figures = train([steps[i] for i in fit_on], task.names, classes, n_classes, cfg, seed,
+                            [steps[i] for i in held])
     save(policy, cfg, out_dir)
-    report: dict[str, float | int] = {
-        "iterations": cfg.iterations, "final_loss": last["total"], "loss_pair": last["pair"], "loss_waypoint": last["waypoint"],
-        "loss_action": last["action"], "episodes": len(fit_on), "frames": int(sum(len(steps[i].pair) for i in fit_on)),
-        "validation_episodes": len(held)}
-    if held:
-        report |= {f"validation_{k}": v for k, v in validate(policy, [steps[i] for i in held]).items()}
-        report |= {f"training_{k}": v for k, v in validate(policy, [steps[i] for i in fit_on]).items()}
+    report: dict[str, float | int] = {"iterations": cfg.iterations, **figures, "episodes": len(fit_on),
+                                      "frames": int(sum(len(steps[i]) for i in fit_on)), "validation_episodes": len(held)}
     report["seconds"] = time.perf_counter() - start
     log.info("wrote %s in %.1f s", out_dir, report["seconds"])
     return report
@@ -139,7 +139,7 @@ def score_model(policy: Policy, cfg: PriorConfig) -> ScoreModel:
 
 
 def em_fit(task: Task, policy: Policy, cfg: PriorConfig, train_cfg: TrainConfig, seed: int,
-           world: list[np.ndarray]) -> Fit:
+           world: list[np.ndarray], status: list[np.ndarray]) -> Fit:
     """The M-step of EM: the given (already trained) policy first, then π_h, π_m, π_l
     trained anew on each round's labels."""
     given = [policy]
@@ -148,7 +148,7 @@ def em_fit(task: Task, policy: Policy, cfg: PriorConfig, train_cfg: TrainConfig,
         if given:
             return score_model(given.pop(), cfg)
         classes, n_classes = semantic_classes(task)
-        retrained, _ = train(labelled_steps(task, world, labels), task.names, classes, n_classes, train_cfg, seed)
+        retrained, _ = train(labelled_steps(task, world, status, labels, train_cfg.still_m), task.names, classes, n_classes, train_cfg, seed)
         return score_model(retrained, cfg)
 
     return fit
@@ -172,6 +172,6 @@ class PolicyRefinement:
         if self.policy.objects != task.names:
             raise HspError(f"{self.source}: a policy for objects {self.policy.objects}, not those of task {task.name!r} {task.names}")
         world = [prepared_poses(p, [o.symmetry for o in task.objects], cfg) for p in poses]
-        fit = em_fit(task, self.policy, cfg, self.train, self.seed, world)
+        fit = em_fit(task, self.policy, cfg, self.train, self.seed, world, status)
         result = em_label(list(zip(world, status)), cfg, fit, self.iterations)
         return result.labels, result.changed

@@ -1,14 +1,26 @@
-"""Supervised training of π_h, π_m and π_l on pseudo-labels (the M-step of Algorithm 1).
+"""Training π_h, π_m and π_l on labels (the M-step of Algorithm 1), with the loss of Section IV-C.
 
-L = L_pair + L_w + L_action: the negative log-likelihoods of the labelled (tool, target)
-pair under π_h, of the way-point w_t under π_m and of the tool's observed step a_t under
-π_l (the paper's L_mem and L_ret are not defined in its text and are left out). Batches
-are whole episodes, drawn until they hold ``batch_steps`` frames, so the LSTM reads every
-history from its start.
+L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
+
+* L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool;
+* L_w: mean squared error of π_m's way-point (standardised units, mean over the 7 numbers),
+  on the frames where a way-point is chosen (the way-point holds until reached, so those
+  are the only frames where π_m is asked; elsewhere copying w_{t−1} would be all it learnt);
+* L_action: −log π_l(a_t), the action in units of its spread in the data;
+* L_mem: ‖M(h_t) − M(h_{t−1})‖₂ where the tool, target and way-point did not change (h_t
+  then holds nothing that h_{t−1} did not: the last entry repeats the one before);
+* L_ret: cross-entropy of the retrieved labels of o+_{t−1}, o*_{t−1} and the squared error of
+  the retrieved w_{t−1} (standardised), from M(h_t).
+
+Terms are means over the frames whose tool and target are tracked (L_action: whose step is
+observed). Batches are whole episodes, drawn until they hold ``batch_steps`` frames, so the
+LSTM reads every history from its start. Every ``checkpoint_every`` iterations the policy
+runs free on the held-out episodes (:func:`free_run`) and the best one there is kept.
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 from dataclasses import asdict, dataclass
@@ -22,11 +34,17 @@ from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
-from hsp.policy.features import Steps
+from hsp.policy.features import STEP_FIELDS, Steps, one_hot
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob
 from hsp.policy.normalisation import Normalisation
+from hsp.policy.stepper import Stepper
 
 log = logging.getLogger(__name__)
+
+FORMAT = 2
+"""Layout of saved models; older ones are refused with a clear message."""
+WAYPOINT_HIT_M = 0.02
+"""A free-running way-point agrees with the label when within this (m)."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +59,19 @@ class TrainConfig:
     memory: int = 32
     validation_every: int = 5
     """Every this-many-th episode (the 5th, 10th, …) is held out to validate; 0: none."""
+    checkpoint_every: int = 1000
+    """Iterations between free-running validations; the best checkpoint on the held-out
+    episodes is kept (the last iterate when nothing is held out)."""
+    arrive_m: float = 0.002
+    """Running, the tool has reached its way-point when the remaining way is shorter than
+    this (translation plus 0.05 m × angle) ..."""
+    settle_frames: int = 3
+    """... and once it has rested there this many frames with π_h keeping the pair, π_m
+    chooses the next one (π_h, which ends sub-tasks, decides first)."""
+    still_m: float = 0.002
+    """A tool moving less than this per frame relative to its target has arrived at its
+    way-point: the next sub-task is decided there (:func:`~hsp.policy.features.decisions`);
+    tracking jitter is under 1 mm per frame."""
 
 
 @dataclass
@@ -53,36 +84,77 @@ class Policy:
     classes: np.ndarray
     """Semantic label index of each object ``(n,)``."""
     n_classes: int
+    arrive_m: float = TrainConfig.arrive_m
+    settle_frames: int = TrainConfig.settle_frames
+    """Way-points are held until reached: :class:`~hsp.policy.stepper.Stepper`."""
 
 
-def _batch(episodes: list[Steps], idx: list[int]) -> dict[str, torch.Tensor]:
-    """Episodes ``idx`` padded to one length, with a mask of real frames."""
-    T = max(len(episodes[i].pair) for i in idx)
+def batch(episodes: list[Steps], idx: list[int]) -> dict[str, torch.Tensor]:
+    """Episodes ``idx`` padded to one length, with a mask of real frames (``frame``)."""
+    T = max(len(episodes[i]) for i in idx)
     out: dict[str, torch.Tensor] = {}
-    for name in ("z", "history", "progress", "pair", "classes", "current", "target_in_tool", "waypoint", "action"):
+    for name in STEP_FIELDS:
         arrays = [getattr(episodes[i], name) for i in idx]
-        pad = [np.pad(a, [(0, T - len(a))] + [(0, 0)] * (a.ndim - 1)) for a in arrays]
-        out[name] = torch.from_numpy(np.stack(pad))
-    lengths = torch.tensor([len(episodes[i].pair) for i in idx])
-    steps = torch.arange(T)[None]
-    out["mask"] = steps < lengths[:, None]
-    out["acted"] = steps < (lengths - 1)[:, None]  # the last frame has no step after it
+        out[name] = torch.from_numpy(np.stack([np.pad(a, [(0, T - len(a))] + [(0, 0)] * (a.ndim - 1)) for a in arrays]))
+    out["frame"] = torch.arange(T)[None] < torch.tensor([len(episodes[i]) for i in idx])[:, None]
     return out
 
 
-def losses(net: Hierarchy, norm: Normalisation, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Mean negative log-likelihoods of one batch: pair, way-point, action."""
-    memory = net.remember(norm.history(b["history"]))
-    progress = norm("progress", b["progress"])
-    logp = net.pi_h(norm("z", b["z"]), memory, progress)
-    pair = -logp.gather(-1, b["pair"][..., None])[..., 0]
-    mean, log_std = net.pi_m(b["classes"], norm("current", b["current"]), memory, progress)
-    w = -gaussian_log_prob(mean, log_std, norm("waypoint", b["waypoint"]))
-    mean, log_std = net.pi_l(norm("target_in_tool", b["target_in_tool"]), norm("waypoint", b["waypoint"]), b["classes"])
-    a = -gaussian_log_prob(mean, log_std, norm("action", b["action"]))
-    m, acted = b["mask"].float(), b["acted"].float()
-    return {"pair": (pair * m).sum() / m.sum(), "waypoint": (w * m).sum() / m.sum(),
-            "action": (a * acted).sum() / acted.sum().clamp(min=1.0)}
+def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean of ``x`` over ``mask`` (entries outside it may be inf or nan)."""
+    return torch.where(mask, x, 0.0).sum() / mask.sum().clamp(min=1)
+
+
+def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Every output of the hierarchy on a batch with its labelled history (teacher forcing)."""
+    net, norm = policy.net, policy.norm
+    codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
+    B, T, n = b["world"].shape[:3]
+    memory, _ = net.remember(norm.history(b["history"]))
+    context = net.context(norm("world", b["world"][:, :, 0]), memory, norm("progress", b["progress"]), b["done"])
+    objects = torch.cat([codes.expand(B, T, n, -1), norm("world", b["world"]), norm("ee_in_object", b["ee_in_object"]),
+                         b["flags"], b["tracked"][..., None].float()], -1)
+    tool, target = b["tool"], b["target"]
+    log_tool = net.pi_tool(objects, context)
+    log_target = net.pi_target(objects, norm("tool_in_object", b["tool_in_object"]), codes[tool], context, tool)
+    pair_classes = torch.cat([codes[tool], codes[target]], -1)
+    gather = lambda x, i: x.gather(2, i[..., None, None].expand(B, T, 1, x.shape[-1]))[:, :, 0]  # noqa: E731
+    pair_flags = torch.cat([gather(b["flags"], tool), gather(b["flags"], target)], -1)
+    current = norm("current", b["current"])
+    waypoint = net.pi_m(pair_classes, current, pair_flags, context)
+    action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
+                               b["remaining"])
+    return {"memory": memory, "log_tool": log_tool, "log_target": log_target, "waypoint": waypoint,
+            "action": action, "action_log_std": log_std, "retrieved": net.retrieve(memory)}
+
+
+def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The six terms of L on one batch (means over the frames that count)."""
+    norm, C = policy.norm, policy.n_classes
+    out = forward(policy, b)
+    labelled = b["labelled"] & b["frame"]
+    acted = b["acted"] & b["frame"]
+    tool_nll = -out["log_tool"].gather(-1, b["tool"][..., None])[..., 0]
+    target_nll = -out["log_target"].gather(-1, b["target"][..., None])[..., 0]
+    w_err = ((out["waypoint"] - norm("waypoint", b["waypoint"])) ** 2).mean(-1)
+    scale = norm.stats["action.std"]
+    a_nll = -gaussian_log_prob(out["action"] / scale, out["action_log_std"], b["action"] / scale)
+    # L_mem: M(h_t) keeps still while the history gains nothing new, i.e. while (o+, o*, w)
+    # of the frame before is that of the frame before it (the LSTM's input repeats)
+    same = torch.zeros_like(labelled)
+    same[:, 1:] = (b["history"][:, 1:] == b["history"][:, :-1]).all(-1) & labelled[:, 1:] & labelled[:, :-1]
+    drift = torch.zeros(same.shape)
+    drift[:, 1:] = (out["memory"][:, 1:] - out["memory"][:, :-1]).norm(dim=-1)
+    # L_ret: from M(h_t), the previous step's tool and target labels and w_{t−1} (the LSTM's last input)
+    previous = b["history"]
+    r = out["retrieved"]
+    has_past = torch.zeros_like(labelled)
+    has_past[:, 1:] = labelled[:, :-1] & b["frame"][:, 1:]
+    ret = (-(torch.log_softmax(r[..., :C], -1) * previous[..., :C]).sum(-1)
+           - (torch.log_softmax(r[..., C:2 * C], -1) * previous[..., C:2 * C]).sum(-1)
+           + ((r[..., 2 * C:] - norm("waypoint", previous[..., 2 * C:])) ** 2).mean(-1))
+    return {"tool": _mean(tool_nll, labelled), "target": _mean(target_nll, labelled), "waypoint": _mean(w_err, labelled & b["decision"]),
+            "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
 
 
 def split(n_episodes: int, every: int) -> tuple[list[int], list[int]]:
@@ -94,51 +166,101 @@ def split(n_episodes: int, every: int) -> tuple[list[int], list[int]]:
     return [i for i in range(n_episodes) if i not in held], held
 
 
+def free_run(policy: Policy, episodes: list[Steps]) -> dict[str, np.ndarray]:
+    """The hierarchy stepped over recorded episodes on its own history (never the labels):
+    per frame, its tool, target and way-point, padded to the longest episode ``(E, T)``."""
+    T = max(len(e) for e in episodes)
+    pad = lambda x: np.concatenate([x, np.repeat(x[-1:], T - len(x), 0)])  # noqa: E731
+    world = np.stack([pad(e.world.astype(np.float64)) for e in episodes])
+    tracked = np.stack([pad(e.tracked) for e in episodes])
+    stepper = Stepper(policy, len(episodes))
+    tool = np.zeros((len(episodes), T), np.int64)
+    target = np.zeros_like(tool)
+    waypoint = np.zeros((len(episodes), T, 7), np.float32)
+    for t in range(T):
+        c = stepper.step(world[:, t], tracked[:, t])
+        tool[:, t], target[:, t], waypoint[:, t] = c.tool, c.target, c.waypoint
+    return {"tool": tool, "target": target, "waypoint": waypoint}
+
+
 def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
-    """On held-out episodes, with their labelled history: how often π_h's most likely pair
-    is the labelled one, and the median distance (mm) of π_m's mean way-point and π_l's mean
-    step from the labelled way-point and the observed step."""
-    net, norm = policy.net, policy.norm
+    """On ``episodes``, over their labelled frames: π_h's pair accuracy running free and
+    with the labelled history (teacher forcing), beside repeating the previous label
+    (``copy_previous``); the median distance (mm) of π_m's way-point from the label, free
+    and teacher-forced; how often the free-running pair is right with its way-point within
+    ``WAYPOINT_HIT_M`` (``free_subtask_accuracy``, what checkpoints are chosen on); and the
+    median distance (mm) of π_l's mean step from the observed one."""
+    b = batch(episodes, list(range(len(episodes))))
     with torch.no_grad():
-        b = _batch(episodes, list(range(len(episodes))))
-        memory = net.remember(norm.history(b["history"]))
-        progress = norm("progress", b["progress"])
-        pair = net.pi_h(norm("z", b["z"]), memory, progress).argmax(-1)
-        w, _ = net.pi_m(b["classes"], norm("current", b["current"]), memory, progress)
-        w = w * norm.stats["waypoint.std"] + norm.stats["waypoint.mean"]
-        a, _ = net.pi_l(norm("target_in_tool", b["target_in_tool"]), norm("waypoint", b["waypoint"]), b["classes"])
-        a = a * norm.stats["action.std"] + norm.stats["action.mean"]
-    mask, acted = b["mask"], b["acted"]
-    return {"pair_accuracy": float((pair == b["pair"])[mask].float().mean()),
-            "waypoint_error_mm": float(1000 * (w - b["waypoint"])[..., :3].norm(dim=-1)[mask].median()),
-            "action_error_mm": float(1000 * (a - b["action"])[..., :3].norm(dim=-1)[acted].median())}
+        out = forward(policy, b)
+    labelled = (b["labelled"] & b["frame"]).numpy()
+    acted = (b["acted"] & b["frame"]).numpy()
+    tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
+    tf_tool = out["log_tool"].argmax(-1).numpy()
+    tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
+    tf_w = policy.norm.unscale("waypoint", out["waypoint"]).numpy()
+    free = free_run(policy, episodes)
+    free_pair = (free["tool"] == tool) & (free["target"] == target)
+    free_w_err = np.linalg.norm(free["waypoint"][..., :3] - w[..., :3], axis=-1)
+    copy = np.zeros_like(labelled)
+    copy[:, 1:] = (tool[:, 1:] == tool[:, :-1]) & (target[:, 1:] == target[:, :-1])
+    first = np.zeros_like(labelled)
+    first[:, 0] = True
+    a_err = np.linalg.norm((out["action"].numpy() - b["action"].numpy())[..., :3], axis=-1)
+    mm = lambda x, m: float(1000 * np.median(x[m])) if m.any() else float("nan")  # noqa: E731
+    return {
+        "pair_accuracy_free": float(free_pair[labelled].mean()),
+        "pair_accuracy_teacher_forced": float(((tf_tool == tool) & (tf_target == target))[labelled].mean()),
+        "pair_accuracy_copy_previous": float(copy[labelled & ~first].mean()),
+        "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
+        "waypoint_error_mm_free": mm(free_w_err, labelled & free_pair),
+        "waypoint_error_mm_teacher_forced": mm(np.linalg.norm(tf_w[..., :3] - w[..., :3], axis=-1), labelled),
+        "action_error_mm": mm(a_err, acted),
+    }
 
 
 def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_classes: int, cfg: TrainConfig,
-          seed: int) -> tuple[Policy, dict[str, float]]:
-    """π_h, π_m, π_l fitted to labelled ``episodes``; returns the policy and the last losses."""
+          seed: int, held_out: list[Steps] | None = None) -> tuple[Policy, dict[str, float]]:
+    """π_h, π_m, π_l fitted to labelled ``episodes``; with ``held_out`` episodes, the
+    checkpoint that runs best on them free (``free_subtask_accuracy``) is returned. Returns
+    the policy and a report: the last losses, and where a checkpoint was chosen, its
+    iteration and validation figures."""
     if not episodes:
         raise HspError("no labelled episodes to train on")
-    if cfg.iterations < 1 or cfg.batch_steps < 1:
-        raise HspError(f"train: iterations and batch_steps must be ≥ 1, got {cfg.iterations}, {cfg.batch_steps}")
+    if cfg.iterations < 1 or cfg.batch_steps < 1 or cfg.checkpoint_every < 1:
+        raise HspError(f"train: iterations, batch_steps and checkpoint_every must be ≥ 1, got {cfg.iterations}, "
+                       f"{cfg.batch_steps}, {cfg.checkpoint_every}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    P = episodes[0].history.shape[1] - 7
-    net = Hierarchy(Sizes(P, n_classes, cfg.hidden, cfg.memory))
-    norm = Normalisation.fit(episodes)
+    net = Hierarchy(Sizes(len(objects), n_classes, cfg.hidden, cfg.memory))
+    policy = Policy(net, Normalisation.fit(episodes), objects, np.asarray(classes), n_classes, cfg.arrive_m,
+                    cfg.settle_frames)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
-    lengths = np.array([len(e.pair) for e in episodes])
-    last: dict[str, float] = {}
-    for _ in track(range(cfg.iterations), description="train π_h, π_m, π_l"):
+    lengths = np.array([len(e) for e in episodes])
+    report: dict[str, float] = {}
+    best: tuple[float, int, dict, dict] | None = None
+    for it in track(range(1, cfg.iterations + 1), description="train π_h, π_m, π_l"):
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
-        parts = losses(net, norm, _batch(episodes, list(order[:take])))
+        parts = losses(policy, batch(episodes, list(order[:take])))
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()
         opt.step()
-        last = {k: v.item() for k, v in parts.items()} | {"total": loss.item()}
-    return Policy(net.eval(), norm, objects, classes, n_classes), last
+        report = {f"loss_{k}": v.item() for k, v in parts.items()} | {"final_loss": loss.item()}
+        if held_out and (it % cfg.checkpoint_every == 0 or it == cfg.iterations):
+            net.eval()
+            figures = validate(policy, held_out)
+            net.train()
+            log.info("iteration %d: held-out free-running sub-task accuracy %.3f, pair accuracy %.3f", it,
+                     figures["free_subtask_accuracy"], figures["pair_accuracy_free"])
+            if best is None or figures["free_subtask_accuracy"] > best[0]:
+                best = (figures["free_subtask_accuracy"], it, copy.deepcopy(net.state_dict()), figures)
+    if best is not None:
+        net.load_state_dict(best[2])
+        report |= {"checkpoint_iteration": best[1]} | {f"validation_{k}": v for k, v in best[3].items()}
+    return Policy(net.eval(), policy.norm, objects, np.asarray(classes), n_classes, cfg.arrive_m,
+                    cfg.settle_frames), report
 
 
 def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
@@ -149,8 +271,9 @@ def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
         tensors = {f"net.{k}": v.contiguous() for k, v in policy.net.state_dict().items()}
         tensors |= {f"norm.{k}": v for k, v in policy.norm.stats.items()}
         save_file(tensors, tmp / "model.safetensors")
-        config = {"train": asdict(cfg), "sizes": asdict(policy.net.sizes), "objects": policy.objects,
-                  "classes": policy.classes.tolist(), "n_classes": policy.n_classes}
+        config = {"format": FORMAT, "train": asdict(cfg), "sizes": asdict(policy.net.sizes), "objects": policy.objects,
+                  "classes": policy.classes.tolist(), "n_classes": policy.n_classes, "arrive_m": policy.arrive_m,
+                  "settle_frames": policy.settle_frames}
         (tmp / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
 
@@ -162,11 +285,14 @@ def load(model_dir: Path) -> Policy:
         raise HspError(f"{model_dir}: not a trained policy (needs config.json and model.safetensors; run `hsp train`)")
     try:
         config = json.loads((model_dir / "config.json").read_text())
+        if config.get("format") != FORMAT:
+            raise ValueError(f"model format {config.get('format', 1)}, this hsp reads {FORMAT}")
         tensors = load_file(model_dir / "model.safetensors")
         net = Hierarchy(Sizes(**config["sizes"]))
         net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
         norm = Normalisation({k[5:]: v for k, v in tensors.items() if k.startswith("norm.")})
-        return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"])
+        return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"],
+                      config["arrive_m"], config["settle_frames"])
     except (SafetensorError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise HspError(f"{model_dir}: not a trained policy of this hsp version (retrain with `hsp train`): {first}") from None

@@ -10,7 +10,6 @@ from hsp.geometry import rotvec_delta
 from hsp.policy.networks import Hierarchy, Sizes
 from hsp.policy.normalisation import FIELDS, Normalisation
 from hsp.policy.stage import semantic_classes
-from hsp.labeling.priors import pairs_of
 from hsp.policy.train import Policy
 
 
@@ -18,10 +17,9 @@ def untrained_policy(task, seed: int = 0) -> Policy:
     """Random networks for ``task`` with unit normalisation (actions of a few mm)."""
     torch.manual_seed(seed)
     classes, n_classes = semantic_classes(task)
-    P = len(pairs_of(len(task.objects)))
-    net = Hierarchy(Sizes(P, n_classes)).eval()
-    dims = {"z": 7 * P, "progress": 7, "current": 7, "target_in_tool": 7, "waypoint": 7, "action": 6}
-    stats = {f"{k}.mean": torch.zeros(dims[k]) for k in FIELDS} | {f"{k}.std": torch.ones(dims[k]) for k in FIELDS}
+    net = Hierarchy(Sizes(len(task.objects), n_classes)).eval()
+    dims = {k: 6 if k in ("remaining", "action") else 7 for k in FIELDS}
+    stats = {f"{k}.mean": torch.zeros(d) for k, d in dims.items()} | {f"{k}.std": torch.ones(d) for k, d in dims.items()}
     stats["action.std"] = torch.full((6,), 0.002)
     return Policy(net, Normalisation(stats), task.names, classes, n_classes)
 
@@ -38,7 +36,8 @@ def test_apply_step_inverts_rotvec_delta():
 
 
 def test_the_history_is_the_runners_own_output(tasks):
-    """At every step the LSTM reads the pair and way-point the runner chose one step before."""
+    """At every step the history holds the tool, target and way-point the runner chose one
+    step before, and the gripper is told to hold the chosen tool."""
     task = tasks["tire-removal"]
     runner = HierarchyRunner(untrained_policy(task), task)
     env = HspEnv(task, EnvConfig(max_steps=20))
@@ -47,31 +46,14 @@ def test_the_history_is_the_runners_own_output(tasks):
     for _ in range(6):
         action = runner.act(world_poses(obs))
         assert action.shape == (8,) and np.all(np.isfinite(action))
-        tool = int(runner.pairs[runner.trace[-1]["pair"]][0])
-        assert action[7] == tool  # the gripper is told to hold the chosen tool (0: the wrench itself)
+        assert action[7] == runner.trace[-1]["tool"]  # 0: the wrench itself
         obs, *_ = env.step(action)
     env.close()
-    P = len(runner.pairs)
-    assert not runner.trace[0]["history"].any()
+    assert runner.trace[0]["previous"] is None
     for before, now in zip(runner.trace, runner.trace[1:]):
-        assert np.flatnonzero(now["history"][:P]).tolist() == [before["pair"]]
-        np.testing.assert_allclose(now["history"][P:], before["waypoint"], rtol=1e-6)
-
-
-def test_identical_objects_keep_the_chosen_one(tasks):
-    """Pairs of the same labels (a wrench on any of the four nuts) are one choice; while it
-    stays the most likely, the runner keeps the nut it took."""
-    task = tasks["tire-removal"]
-    runner = HierarchyRunner(untrained_policy(task), task)
-    runner.reset(None, 0)
-    bolts = [i for i, (t, j) in enumerate(runner.pairs) if t == 0 and task.objects[j].label == "bolt"]
-    logp = np.full(len(runner.pairs), -20.0)
-    logp[bolts] = np.log([0.1, 0.15, 0.2, 0.25])
-    first = runner._choose(logp)
-    assert first == bolts[3]
-    runner.pair = first
-    logp[bolts] = np.log([0.4, 0.2, 0.2, 0.1])  # another nut now scores higher, the label pair is the same
-    assert runner._choose(logp) == first
+        tool, target, w = now["previous"]
+        assert (tool, target) == (before["tool"], before["target"])
+        np.testing.assert_array_equal(w, before["waypoint"])
 
 
 def test_the_labelled_step_commands_the_next_pose(tasks):

@@ -10,12 +10,11 @@ from hsp.labeling.viterbi import Transition, viterbi
 from hsp.policy.scores import PolicyScores
 from hsp.policy.train import TrainConfig, train
 from tests.labeling.test_em import _episode
-from tests.policy.test_features import _steps
-from tests.policy.test_train import CLASSES
+from tests.policy.test_features import CLASSES, _steps
 
 
 def _policy(iterations=200):
-    policy, _ = train([_steps()[3]] * 2, ["ee", "a", "b"], CLASSES, 2,
+    policy, _ = train([_steps()[2]] * 2, ["ee", "a", "b"], CLASSES, 2,
                       TrainConfig(iterations=iterations, batch_steps=40, learning_rate=3e-3), seed=0)
     return policy
 
