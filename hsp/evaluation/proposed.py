@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hsp.errors import HspError
-from hsp.geometry import compose, inverse, relative
+from hsp.geometry import compose, relative
 from hsp.labeling.label import canonical_poses
 from hsp.policy.stepper import Stepper
 from hsp.policy.train import Policy

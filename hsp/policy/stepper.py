@@ -23,7 +23,6 @@ import torch
 
 from hsp.policy.features import FLAGS, frame_observation, one_hot, remaining_way, way_length
 from hsp.geometry import normalize_quat, relative
-from hsp.policy.normalisation import Normalisation
 
 
 @dataclass
