@@ -69,7 +69,6 @@ class HierarchyRunner:
         self.trace.append({"previous": None if history is None else (int(history[0][0]), int(history[1][0]),
                                                                      history[2][0].copy()),
                            "tool": tool, "target": target, "waypoint": choice.waypoint[0].copy(),
-                           "log_tool": choice.log_tool[0].copy()})
-        self.last_action = choice.action[0].astype(np.float64)
-        tcp = tcp_command(poses, world, tool, target, self.last_action)
+                           "action": choice.action[0].astype(np.float64), "log_tool": choice.log_tool[0].copy()})
+        tcp = tcp_command(poses, world, tool, target, self.trace[-1]["action"])
         return np.concatenate([tcp, [float(tool)]])

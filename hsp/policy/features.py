@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from hsp.geometry import relative, rotvec_delta
+from hsp.geometry import rotvec_delta
 from hsp.labeling.priors import pose_points, relative_poses
 
 FLAGS = 3
@@ -209,8 +209,3 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
 
 STEP_FIELDS = tuple(f.name for f in fields(Steps))
 
-
-def frame_observation(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """What the closed-loop runner observes of one frame ``(n, 7)``: world poses and the
-    end-effector in each object's frame ``(n, 7)`` each."""
-    return world.astype(np.float32), relative(np.repeat(world[:1], len(world), 0), world).astype(np.float32)

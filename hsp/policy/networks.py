@@ -24,11 +24,15 @@ is in physical units scaled per axis by the data's spread.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 from torch import nn
 
 from hsp.policy.features import FLAGS
+
+if TYPE_CHECKING:
+    from hsp.policy.normalisation import Normalisation
 
 LOG_STD_RANGE = (-5.0, 2.0)
 LOG_SQRT_2PI = 0.9189385332046727
@@ -99,6 +103,18 @@ class Hierarchy(nn.Module):
 
     def context(self, ee: torch.Tensor, memory: torch.Tensor, progress: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
         return torch.cat([ee, memory, self.progress(progress), done], -1)
+
+    def read(self, norm: "Normalisation", codes: torch.Tensor, world: torch.Tensor, ee_in_object: torch.Tensor,
+             flags: torch.Tensor, tracked: torch.Tensor, progress: torch.Tensor, done: torch.Tensor,
+             memory: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The per-object features ``(..., n, F)`` and the context ``(..., D)`` that π_h, π_m
+        read, from raw world poses ``(..., n, 7)``, the end-effector in each object's frame,
+        history flags ``(..., n, 3)``, tracked ``(..., n)`` bool, g_t, done fractions and
+        M(h_t); ``codes`` are the objects' one-hot labels ``(n, C)``."""
+        context = self.context(norm("world", world[..., 0, :]), memory, norm("progress", progress), done)
+        objects = torch.cat([codes.expand(*world.shape[:-1], -1), norm("world", world), norm("ee_in_object", ee_in_object),
+                             flags, tracked[..., None].float()], -1)
+        return objects, context
 
     def pi_tool(self, objects: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
         """log π_h(o+) over objects ``(..., n)`` from per-object features ``(..., n, F)``."""

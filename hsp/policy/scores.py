@@ -36,10 +36,7 @@ class PolicyScores:
         rel = self.prior.rel.astype(np.float32)  # (H, P, 7): p_t[i, j]
         with torch.no_grad():
             out = forward(policy, b)
-            context = net.context(norm("world", b["world"][0, :, 0]), out["memory"][0], norm("progress", b["progress"][0]),
-                                  b["done"][0])
-            objects = torch.cat([codes.expand(self.H, n, -1), norm("world", b["world"][0]),
-                                 norm("ee_in_object", b["ee_in_object"][0]), b["flags"][0], b["tracked"][0, ..., None].float()], -1)
+            objects, context = out["objects"][0], out["context"][0]
             log_tool = out["log_tool"][0].numpy()  # (H, n)
             log_target = np.zeros((self.H, n, n), np.float32)
             for i in range(n):  # π_h(o* | o+ = i)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hsp.policy.features import FLAGS, frame_observation, one_hot, remaining_way, way_length
+from hsp.policy.features import FLAGS, one_hot, remaining_way, way_length
 from hsp.geometry import normalize_quat, relative
 
 
@@ -57,7 +57,6 @@ class Stepper:
         self.class_codes = one_hot(self.classes, self.C)  # (n, C)
         self.members = np.maximum(self.class_codes.sum(0), 1.0)
         self.state: tuple[torch.Tensor, torch.Tensor] | None = None
-        self.t = 0
         self.prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # tool, target, w at t − 1
         self.prev2_pair: tuple[np.ndarray, np.ndarray] | None = None  # tool, target at t − 2
         self.ended = np.zeros((batch, self.n), np.float32)
@@ -94,19 +93,15 @@ class Stepper:
             raise ValueError(f"step: poses of {B} episodes × {n} objects, the stepper runs {self.B} × {self.n}")
         tracked = np.ones((B, n), bool) if tracked is None else tracked
         x, g, flags = self._history(world)
-        obs = [frame_observation(w) for w in world]
-        world32 = np.stack([o[0] for o in obs])
-        ee_in = np.stack([o[1] for o in obs])
-        done = (flags[..., 2] @ self.class_codes) / self.members
+        ee_in = relative(np.repeat(world[:, :1], n, 1), world).astype(np.float32)  # p_t[0, j]
+        done = ((flags[..., 2] @ self.class_codes) / self.members).astype(np.float32)
         net, norm = self.net, self.norm
         f = torch.from_numpy
         rows = np.arange(B)
         with torch.no_grad():
             memory, self.state = net.remember(norm.history(f(x))[:, None], self.state)
-            memory = memory[:, 0]
-            context = net.context(norm("world", f(world32[:, 0])), memory, norm("progress", f(g)), f(done.astype(np.float32)))
-            objects = torch.cat([f(np.broadcast_to(self.class_codes, (B, n, self.C)).copy()), norm("world", f(world32)),
-                                 norm("ee_in_object", f(ee_in)), f(flags), f(tracked[..., None].astype(np.float32))], -1)
+            objects, context = net.read(norm, f(self.class_codes), f(world.astype(np.float32)), f(ee_in), f(flags),
+                                        f(tracked), f(g), f(done), memory[:, 0])
             log_tool = net.pi_tool(objects, context)
             tool = log_tool.argmax(-1).numpy() if forced is None else forced[0]
             tool_in = relative(world[rows, tool][:, None].repeat(n, 1), world).astype(np.float32)
@@ -132,5 +127,4 @@ class Stepper:
                                  norm("remaining", f(remaining)), f(remaining))
         self.prev2_pair = None if self.prev is None else (self.prev[0], self.prev[1])
         self.prev = (tool, target, w)
-        self.t += 1
         return Choice(tool, target, w, action.numpy(), log_tool.numpy(), log_target.numpy())

@@ -109,11 +109,10 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     """Every output of the hierarchy on a batch with its labelled history (teacher forcing)."""
     net, norm = policy.net, policy.norm
     codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
-    B, T, n = b["world"].shape[:3]
+    B, T = b["world"].shape[:2]
     memory, _ = net.remember(norm.history(b["history"]))
-    context = net.context(norm("world", b["world"][:, :, 0]), memory, norm("progress", b["progress"]), b["done"])
-    objects = torch.cat([codes.expand(B, T, n, -1), norm("world", b["world"]), norm("ee_in_object", b["ee_in_object"]),
-                         b["flags"], b["tracked"][..., None].float()], -1)
+    objects, context = net.read(norm, codes, b["world"], b["ee_in_object"], b["flags"], b["tracked"], b["progress"],
+                                b["done"], memory)
     tool, target = b["tool"], b["target"]
     log_tool = net.pi_tool(objects, context)
     log_target = net.pi_target(objects, norm("tool_in_object", b["tool_in_object"]), codes[tool], context, tool)
@@ -124,8 +123,8 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     waypoint = net.pi_m(pair_classes, current, pair_flags, context)
     action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
                                b["remaining"])
-    return {"memory": memory, "log_tool": log_tool, "log_target": log_target, "waypoint": waypoint,
-            "action": action, "action_log_std": log_std, "retrieved": net.retrieve(memory)}
+    return {"memory": memory, "objects": objects, "context": context, "log_tool": log_tool, "log_target": log_target,
+            "waypoint": waypoint, "action": action, "action_log_std": log_std, "retrieved": net.retrieve(memory)}
 
 
 def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
