@@ -1,7 +1,8 @@
 """``proposed`` (and ``supervised``): π_h, π_m and π_l run closed loop on their own history.
 
 Per control step, from the observed world poses (symmetric objects' orientations made
-canonical, as in training): the history is the tools, targets and way-points this runner
+canonical as in training: the equivalent chosen at the episode's first frame is kept, so a
+cube turning past 45° does not jump by a quarter turn in its target's frame): the history is the tools, targets and way-points this runner
 chose itself (never labels), the LSTM keeping its state across steps; π_h's most likely
 tool, then its most likely target given that tool, π_m's way-point w_t and π_l's mean
 action a_t, the tool's step in the target's frame. The step is turned into a command for the
@@ -58,17 +59,19 @@ class HierarchyRunner:
         self.symmetries = [o.symmetry for o in task.objects]
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
+        self.first = np.asarray(poses, np.float64).copy()
         self.stepper = Stepper(self.policy, 1)
         self.trace: list[dict[str, np.ndarray | int]] = []
 
     def act(self, poses: np.ndarray) -> np.ndarray:
-        world = canonical_poses(poses[None], self.symmetries)[0]
+        world = canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
         history = self.stepper.prev
         choice = self.stepper.step(world[None])
         tool, target = int(choice.tool[0]), int(choice.target[0])
         self.trace.append({"previous": None if history is None else (int(history[0][0]), int(history[1][0]),
                                                                      history[2][0].copy()),
-                           "tool": tool, "target": target, "waypoint": choice.waypoint[0].copy(),
+                           "decided": bool(choice.decided[0]), "tool": tool, "target": target,
+                           "waypoint": choice.waypoint[0].copy(),
                            "action": choice.action[0].astype(np.float64), "log_tool": choice.log_tool[0].copy()})
         tcp = tcp_command(poses, world, tool, target, self.trace[-1]["action"])
         return np.concatenate([tcp, [float(tool)]])

@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hsp.geometry import rotvec_delta
-from hsp.labeling.priors import pose_points, relative_poses
+from hsp.labeling.priors import relative_poses
 
 FLAGS = 3
 """Per-object history flags: previous tool, previous target, target of an ended sub-task."""
@@ -138,50 +138,52 @@ def memory_input(tool: np.ndarray, target: np.ndarray, waypoint: np.ndarray, cla
 
 
 def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray, still_m: float,
-              arm: float = ARM_M, half_window: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Labels ``(H,)`` each as a robot must act on them: a sub-task ends where its tool
-    arrives at its way-point, so the frames a demonstrator rested there before moving on are
-    given to the next sub-task (tool, target and way-point frame k), and marked ``waiting``.
+              settle_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Labels ``(H,)`` each as a robot acts on them: a sub-task ends where its tool, having
+    moved, comes to rest, and the next one is chosen once it has rested ``settle_frames``
+    frames, which is the rule the :class:`~hsp.policy.stepper.Stepper` runs by. So the frames
+    a demonstrator rested beyond that before moving on go to the next sub-task (tool, target
+    and way-point frame k); the frames whose step is the rest are marked ``waiting``.
 
     Labels put a pause with the motion it ends; a robot that only switched where the
-    demonstrator did would wait at the way-point for a switch that nothing in its
-    observation announces (the next motion is what the switch causes). Here the switch comes
-    where g_t falls to zero. The tool is resting when its pose relative to the target, as a
-    point of R⁷ (:func:`~hsp.labeling.priors.pose_points`, turns counted at ``arm``), moves
-    less than ``still_m`` per frame over ``half_window`` frames either side. ``rel`` is
-    p_t[i, j] ``(H, n, n, 7)``. Returns tool, target, k and ``waiting`` (bool)."""
+    demonstrator did would wait for a switch that nothing in its observation announces (the
+    next motion is what the switch causes). A frame is still when the tool's pose relative
+    to the target moved less than ``still_m`` (:func:`way_length`) since the frame before.
+    ``rel`` is p_t[i, j] ``(H, n, n, 7)``. Returns tool, target, k and ``waiting`` (bool)."""
     H = len(tool)
     t = np.arange(H)
-    a, b = np.clip(t - half_window, 0, H - 1), np.clip(t + half_window, 0, H - 1)
-    span = np.maximum(b - a, 1)
-    step = np.linalg.norm(pose_points(rel[b, tool, target], arm) - pose_points(rel[a, tool, target], arm), axis=-1) / span
-    still = step < still_m
+    moving = way_length(remaining_way(rel[np.maximum(t - 1, 0), tool, target], rel[t, tool, target])) >= still_m
     tool, target, k = tool.copy(), target.copy(), waypoint_index.copy()
     waiting = np.zeros(H, bool)
     change = np.flatnonzero((tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (k[1:] != k[:-1])) + 1
-    starts = np.concatenate([[0], change])
-    for s0, s in zip(starts[:-1], starts[1:]):
-        moving = np.flatnonzero(~still[s0:s])
-        arrive = s0 + (moving[-1] + 1 if moving.size else 1)  # first frame of the trailing rest, never the segment's first
-        if arrive < s:
-            tool[arrive:s], target[arrive:s], k[arrive:s] = tool[s], target[s], k[s]
-            waiting[arrive:s] = True
+    starts = np.concatenate([[0], change, [H]])
+    for s0, s in zip(starts[:-2], starts[1:-1]):
+        moved = np.flatnonzero(moving[s0 + 1:s])
+        if not moved.size:
+            continue
+        last = s0 + 1 + moved[-1]  # the frame the tool arrived: it moved from last − 1, rests from here
+        decide = last + settle_frames
+        if last + 1 < s:
+            waiting[last:s] = True  # their steps t → t + 1 are the rest
+        if decide < s:
+            tool[decide:s], target[decide:s], k[decide:s] = tool[s], target[s], k[s]
     return tool, target, k, waiting
 
 
 def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, target: np.ndarray,
-                  waypoint_index: np.ndarray, classes: np.ndarray, n_classes: int, still_m: float | None = None) -> Steps:
+                  waypoint_index: np.ndarray, classes: np.ndarray, n_classes: int, still_m: float | None = None,
+                  settle_frames: int = 3) -> Steps:
     """:class:`Steps` of one episode from canonical world poses ``(H, n, 7)``, whether each
     object is tracked ``(H, n)`` and its labels: tool, target and way-point frame k per frame
     ``(H,)`` each (w_t = p_k[o+_t, o*_t]). With ``still_m``, the labels are first turned
-    into the robot's decisions (:func:`decisions`); the steps of the frames spent waiting
-    for the next sub-task do not count as its actions."""
+    into the robot's decisions (:func:`decisions`, with ``settle_frames``); the steps of the
+    frames spent resting do not count as actions."""
     H, n = world.shape[:2]
     t = np.arange(H)
     rel = relative_poses(world)  # (H, n, n, 7): p_t[i, j]
     waiting = np.zeros(H, bool)
     if still_m is not None:
-        tool, target, waypoint_index, waiting = decisions(rel, tool, target, waypoint_index, still_m)
+        tool, target, waypoint_index, waiting = decisions(rel, tool, target, waypoint_index, still_m, settle_frames)
     current = rel[t, tool, target]
     waypoint = rel[waypoint_index, tool, target]
     flags = history_flags(tool, target, n)

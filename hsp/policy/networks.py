@@ -9,12 +9,22 @@
   context, so identical objects are interchangeable. The target head also reads the tool
   in the candidate's frame and the tool's label; the end-effector and the tool itself are
   never targets.
-* π_m: the pair's labels and history flags, p_t[o+, o*] and the context → two hidden
-  layers of 64 → w_t (7), trained by mean squared error (L_w).
+* π_m: the pair's labels and history flags, p_t[o+, o*] and the context but e_t (the
+  paper's π_m sees the pair, their relative pose and the history, not where the arm is)
+  → two hidden layers of 64 → a mixture of ``modes`` diagonal Gaussians over w_t (7),
+  trained by its negative log-likelihood (L_w); the robot takes the mean of the heaviest
+  component. Not the paper's mean squared error: pseudo-labels give one decision two
+  answers (an approach way-point above a block in some episodes, none in others), and a
+  squared error's answer lies between them (closed loop: 3.7 cm above the block, between
+  the labels' 0 and 8 cm, too high to grasp). (Without e_t: with it, the few decision
+  frames π_m is trained on let it lean on the layout, and closed loop it put a block's
+  place 5 cm above where every label has it.)
 * π_l: the pair's labels, p_t[o+, o*], w_t and the remaining way from one to the other →
   two hidden layers of 64 → a diagonal Gaussian over a_t. Its mean is a per-axis fraction
-  (0 to 1) of the remaining way: the step always heads for w_t and vanishes there, so the
-  low level is a stable controller in closed loop, whatever its small errors.
+  of the remaining way, between ``min_fraction`` and 1: the step always heads for w_t,
+  vanishes there and never stalls short of it, so the low level is a stable controller in
+  closed loop, whatever its small errors. (Without the floor, π_l learnt the demonstrator's
+  slow starts as near-zero fractions and, closed loop, stopped 25 mm short of w_t.)
 * Retrieval (L_ret): from M(h_t), the labels of o+_{t−1} and o*_{t−1} and w_{t−1}.
 
 Inputs are standardised (:class:`~hsp.policy.normalisation.Normalisation`); π_l's action
@@ -69,6 +79,10 @@ class Sizes:
     classes: int
     hidden: int = 64
     memory: int = 32
+    min_fraction: float = 0.05
+    """Least fraction of the remaining way that π_l's mean step covers."""
+    modes: int = 3
+    """Components of π_m's mixture."""
 
     @property
     def object_features(self) -> int:
@@ -92,7 +106,7 @@ class Hierarchy(nn.Module):
         self.memory = nn.LSTM(2 * C + 7, s.memory, batch_first=True)
         self.tool_head = ObjectScorer(s.object_features, s.context, s.hidden)
         self.target_head = ObjectScorer(s.object_features + 7, C + s.context, s.hidden)
-        self.intermediate = mlp(2 * C + 7 + 2 * FLAGS + s.context, 7, s.hidden)
+        self.intermediate = mlp(2 * C + 7 + 2 * FLAGS + s.context - 7, s.modes * 15, s.hidden)
         self.low = mlp(2 * C + 7 + 7 + 6, 12, s.hidden)
         self.retrieve = nn.Linear(s.memory, 2 * C + 7)
 
@@ -129,13 +143,32 @@ class Hierarchy(nn.Module):
         barred = (index == 0) | (index == tool.unsqueeze(-1))
         return torch.log_softmax(logits.masked_fill(barred, float("-inf")), -1)
 
-    def pi_m(self, classes: torch.Tensor, current: torch.Tensor, flags: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
-        """The way-point w_t ``(..., 7)``, standardised."""
-        return self.intermediate(torch.cat([classes, current, flags, context], -1))
+    def pi_m(self, classes: torch.Tensor, current: torch.Tensor, flags: torch.Tensor, context: torch.Tensor
+             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """π_m's mixture over w_t, standardised: log-weights ``(..., K)``, means and log-σ
+        ``(..., K, 7)`` each; the context's e_t is not read."""
+        out = self.intermediate(torch.cat([classes, current, flags, context[..., 7:]], -1))
+        out = out.unflatten(-1, (self.sizes.modes, 15))
+        return torch.log_softmax(out[..., 0], -1), out[..., 1:8], out[..., 8:].clamp(*LOG_STD_RANGE)
+
 
     def pi_l(self, classes: torch.Tensor, current: torch.Tensor, waypoint: torch.Tensor, remaining: torch.Tensor,
              remaining_raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean (physical units, a fraction of ``remaining_raw`` per axis) and log-σ (in the
         action's scaled units) of a_t ``(..., 6)`` each; the other inputs are standardised."""
         out = self.low(torch.cat([classes, current, waypoint, remaining], -1))
-        return torch.sigmoid(out[..., :6]) * remaining_raw, out[..., 6:].clamp(*LOG_STD_RANGE)
+        lo = self.sizes.min_fraction
+        return (lo + (1 - lo) * torch.sigmoid(out[..., :6])) * remaining_raw, out[..., 6:].clamp(*LOG_STD_RANGE)
+
+
+def mixture_log_prob(mixture: tuple[torch.Tensor, torch.Tensor, torch.Tensor], x: torch.Tensor) -> torch.Tensor:
+    """log p(x) under π_m's mixture (log-weights ``(..., K)``, means and log-σ ``(..., K, 7)``)
+    of points ``(..., 7)``."""
+    log_weight, mean, log_std = mixture
+    return torch.logsumexp(log_weight + gaussian_log_prob(mean, log_std, x.unsqueeze(-2)), -1)
+
+
+def mixture_mode(mixture: tuple[torch.Tensor, torch.Tensor, torch.Tensor]) -> torch.Tensor:
+    """The mean of the heaviest component ``(..., 7)``: the way-point the robot goes to."""
+    log_weight, mean, _ = mixture
+    return mean.gather(-2, log_weight.argmax(-1)[..., None, None].expand(*mean.shape[:-2], 1, mean.shape[-1]))[..., 0, :]

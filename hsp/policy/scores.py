@@ -1,7 +1,11 @@
 """Viterbi scores from the trained networks (the E-step of EM, Algorithm 1).
 
 π_h scores the pairs, log π(o+) + log π(o* | o+), and π_m the way-points in place of the
-priors; π_l's term stays the prior's straight-line step. π_m is trained by squared error
+priors (π_m's mixture density of each candidate); π_l's term stays the prior's
+straight-line step. π_h chooses only where a sub-task
+ends (:class:`~hsp.policy.stepper.Stepper`), and so does π_m: their scores count at the
+previous round's decision frames only; elsewhere π_h's are uniform (the transition's γ
+keeps the pair) and the way-points' are the prior's. π_m is trained by squared error
 in standardised units, which is the log-density of a unit Gaussian there. The memory and
 history inputs come from the labels of the previous round: the history of a state depends
 on the path that reached it, which a Viterbi recursion cannot carry, so the previous
@@ -17,7 +21,7 @@ from hsp.geometry import relative
 from hsp.labeling.label import EpisodeLabels
 from hsp.labeling.priors import NEG, PriorConfig, PriorScores
 from hsp.policy.features import episode_steps, one_hot
-from hsp.policy.networks import LOG_SQRT_2PI
+from hsp.policy.networks import mixture_log_prob
 from hsp.policy.train import Policy, batch, forward
 
 
@@ -30,7 +34,8 @@ class PolicyScores:
         self.H, self.P = self.prior.H, self.prior.P
         pairs, norm, net = self.prior.pairs, policy.norm, policy.net
         n = world.shape[1]
-        steps = episode_steps(world, ok, labels.tool, labels.target, labels.waypoint_index, policy.classes, policy.n_classes)
+        steps = episode_steps(world, ok, labels.tool, labels.target, labels.waypoint_index, policy.classes, policy.n_classes,
+                              policy.still_m, policy.settle_frames)
         b = batch([steps], [0])
         codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))
         rel = self.prior.rel.astype(np.float32)  # (H, P, 7): p_t[i, j]
@@ -43,25 +48,30 @@ class PolicyScores:
                 tool = torch.full((self.H,), i)
                 tool_in = torch.from_numpy(relative(world[:, i:i + 1].repeat(n, 1), world).astype(np.float32))
                 log_target[:, i] = net.pi_target(objects, norm("tool_in_object", tool_in), codes[tool], context, tool).numpy()
-            self._unary = log_tool[:, pairs[:, 0]] + log_target[:, pairs[:, 0], pairs[:, 1]]  # (H, P)
+            pair_scores = log_tool[:, pairs[:, 0]] + log_target[:, pairs[:, 0], pairs[:, 1]]  # (H, P)
+            self._unary = np.where(steps.decision[:, None], pair_scores, np.float32(-np.log(self.P)))
+            self._decision = steps.decision
             flags = b["flags"][0]  # (H, n, 3)
             i, j = torch.from_numpy(pairs[:, 0]), torch.from_numpy(pairs[:, 1])
             pair_classes = torch.cat([codes[i], codes[j]], -1).expand(self.H, -1, -1)
             pair_flags = torch.cat([flags[:, i], flags[:, j]], -1)
-            mean = net.pi_m(pair_classes, norm("current", torch.from_numpy(rel)), pair_flags,
-                            context[:, None].expand(-1, self.P, -1))
-            self._mean = mean.numpy()  # (H, P, 7), standardised
-            self._candidates = norm("waypoint", torch.from_numpy(rel)).numpy().transpose(1, 0, 2)  # (P, H, 7)
+            self._mixture = net.pi_m(pair_classes, norm("current", torch.from_numpy(rel)), pair_flags,
+                                     context[:, None].expand(-1, self.P, -1))  # (H, P, K) and (H, P, K, 7)
+            self._candidates = norm("waypoint", torch.from_numpy(rel)).transpose(0, 1)  # (P, H, 7), standardised
         self._allowed = self.prior.candidates()
 
     def unary(self, t: int) -> np.ndarray:
         return self._unary[t]
 
     def jump(self, t: int) -> np.ndarray:
-        """log π_m(w_k | …) of every candidate k ≥ t (unit Gaussian in standardised units),
-        minus log(H − t) as in the prior."""
-        z = self._candidates[:, t:] - self._mean[t][:, None]
-        logp = -0.5 * np.einsum("phd,phd->ph", z, z) - 7 * LOG_SQRT_2PI
+        """log π_m(w_k | …) of every candidate k ≥ t (its mixture density in standardised
+        units), minus log(H − t) as in the prior; at frames where π_m is not asked (not a
+        decision of the previous round) the prior's term."""
+        if not self._decision[t]:
+            return self.prior.jump(t)
+        mixture = tuple(x[t][:, None] for x in self._mixture)  # (P, 1, K) and (P, 1, K, 7)
+        with torch.no_grad():
+            logp = mixture_log_prob(mixture, self._candidates[:, t:]).numpy()  # (P, H − t)
         return np.where(self._allowed[:, t:], logp - np.float32(np.log(self.H - t)), NEG).astype(np.float32)
 
     def motion(self, t: int) -> np.ndarray:

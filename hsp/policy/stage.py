@@ -88,9 +88,9 @@ def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray])
 
 
 def labelled_steps(task: Task, world: list[np.ndarray], status: list[np.ndarray], labels: list[EpisodeLabels],
-                   still_m: float | None) -> list[Steps]:
+                   cfg: TrainConfig) -> list[Steps]:
     """Network inputs and targets of every episode (canonical poses, as the labels are;
-    decided on arrival with ``still_m``, :func:`~hsp.policy.features.decisions`); frames
+    decided where the tool rests, :func:`~hsp.policy.features.decisions`); frames
     where the labelled tool or target is lost do not count in the losses."""
     classes, n_classes = semantic_classes(task)
     n = len(task.objects)
@@ -100,7 +100,7 @@ def labelled_steps(task: Task, world: list[np.ndarray], status: list[np.ndarray]
         if bad.any():
             raise HspError(f"labels name a (tool, target) pair that cannot be: {lab.tool[bad][0]}, {lab.target[bad][0]}")
         out.append(episode_steps(w, st != TrackStatus.LOST, lab.tool, lab.target, lab.waypoint_index, classes, n_classes,
-                                 still_m))
+                                 cfg.still_m, cfg.settle_frames))
     return out
 
 
@@ -118,7 +118,7 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     else:
         labels = annotation_labels(task, recordings_dir, poses)  # type: ignore[arg-type]
     source = labels_file or recordings_dir
-    steps = labelled_steps(task, world, status, labels, cfg.still_m)
+    steps = labelled_steps(task, world, status, labels, cfg)
     classes, n_classes = semantic_classes(task)
     fit_on, held = split(len(steps), cfg.validation_every)
     log.info("train %s: %d episodes (%d frames) from %s and %s, %d more held out to validate", task.name, len(fit_on),
@@ -148,7 +148,7 @@ def em_fit(task: Task, policy: Policy, cfg: PriorConfig, train_cfg: TrainConfig,
         if given:
             return score_model(given.pop(), cfg)
         classes, n_classes = semantic_classes(task)
-        retrained, _ = train(labelled_steps(task, world, status, labels, train_cfg.still_m), task.names, classes, n_classes, train_cfg, seed)
+        retrained, _ = train(labelled_steps(task, world, status, labels, train_cfg), task.names, classes, n_classes, train_cfg, seed)
         return score_model(retrained, cfg)
 
     return fit

@@ -7,11 +7,17 @@ it over held-out recordings; the closed-loop runner steps it on the robot's obse
 Given ``forced`` choices (the labels), it reproduces the teacher-forced batch computation
 of training exactly (tested), so what is trained is what runs.
 
-A way-point holds until it is reached: π_m chooses w_t when the tool or target changes, or
-once the tool has rested within ``policy.arrive_m`` of w_{t−1} for ``policy.settle_frames``
-frames with π_h keeping the pair (π_h decides first whether the sub-task is over);
-otherwise w_t = w_{t−1}. This is how the labels are made (w is one pose per sub-task
-segment), and it keeps a way-point from drifting with the tool that follows it.
+A sub-task runs until its tool has come to rest at its way-point: the pair and the
+way-point hold until, for ``policy.settle_frames`` frames in a row, the tool either is
+within ``policy.arrive_m`` of w_{t−1} (reached), or moves less than ``policy.still_m``
+while its remaining way shrinks by less than half the least fraction π_l's step covers
+(stopped short: something holds it, the way-point is not quite reachable, or the tool was
+not grasped). Only then, and at the first
+frame, are π_h and π_m asked for the next tool, target and way-point; they are trained on
+exactly those frames (the labels' decisions, :func:`~hsp.policy.features.decisions`, end a
+sub-task where the demonstrator's tool came to rest at its way-point). A slow step far
+from w_t is neither, so a low level that crawls does not end its sub-task early. Between
+decisions the LSTM still reads the history every frame, as in training.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import torch
 
 from hsp.policy.features import FLAGS, one_hot, remaining_way, way_length
 from hsp.geometry import normalize_quat, relative
+from hsp.policy.networks import mixture_mode
 
 
 @dataclass
@@ -41,15 +48,19 @@ class Choice:
     """log π_h(o+) over objects ``(B, n)``."""
     log_target: np.ndarray
     """log π_h(o* | o+_t) over objects ``(B, n)``."""
+    decided: np.ndarray
+    """Whether π_h and π_m chose at this frame (the sub-task before was over) ``(B,)``."""
 
 
 class Stepper:
     """Batched one-frame steps of a trained policy (``policy.net``, ``policy.norm``,
-    ``policy.classes``, ``policy.n_classes``) over ``batch`` episodes."""
+    ``policy.classes``, ``policy.n_classes``, ``policy.arrive_m``, ``policy.still_m``,
+    ``policy.settle_frames``)
+    over ``batch`` episodes."""
 
     def __init__(self, policy, batch: int = 1) -> None:
         self.net, self.norm = policy.net, policy.norm
-        self.arrive_m, self.settle_frames = policy.arrive_m, policy.settle_frames
+        self.arrive_m, self.still_m, self.settle_frames = policy.arrive_m, policy.still_m, policy.settle_frames
         self.classes = np.asarray(policy.classes)
         self.C = int(policy.n_classes)
         self.n = len(self.classes)
@@ -60,7 +71,10 @@ class Stepper:
         self.prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # tool, target, w at t − 1
         self.prev2_pair: tuple[np.ndarray, np.ndarray] | None = None  # tool, target at t − 2
         self.ended = np.zeros((batch, self.n), np.float32)
-        self.rested = np.zeros(batch, np.int64)  # frames the tool has been at w_{t−1} with the pair kept
+        self.rested = np.zeros(batch, np.int64)  # frames in a row the tool has been at rest at its way-point
+        self.prev_current: np.ndarray | None = None  # p_{t−1}[o+_{t−1}, o*_{t−1}]
+        self.remaining = np.zeros(batch)  # length of the way from the tool to w_{t−1} at t − 1
+        self.shrink = 1.0 - 0.5 * policy.net.sizes.min_fraction  # less progress than this: stopped
 
     def _history(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """LSTM input ``(B, 2C + 7)``, g_t ``(B, 7)`` and flags ``(B, n, 3)`` at this frame."""
@@ -83,6 +97,26 @@ class Stepper:
         flags[..., 2] = self.ended
         return x, g, flags
 
+    def _kept(self, i: int) -> np.ndarray:
+        return np.zeros(self.B, np.int64) if self.prev is None else self.prev[i]
+
+    def _decide(self, world: np.ndarray) -> np.ndarray:
+        """Whether the sub-task is over at this frame ``(B,)``: the first frame, or the tool
+        has now been at rest at its way-point (reached, or stopped short) for
+        ``settle_frames`` frames."""
+        if self.prev is None:
+            return np.ones(self.B, bool)
+        rows = np.arange(self.B)
+        current = relative(world[rows, self.prev[0]], world[rows, self.prev[1]])
+        remaining = way_length(remaining_way(current, self.prev[2]))
+        reached = remaining < self.arrive_m
+        moved = way_length(remaining_way(self.prev_current, current))
+        stopped = (moved < self.still_m) & (remaining > self.shrink * self.remaining)
+        self.rested = np.where(reached | stopped, self.rested + 1, 0)
+        decide = self.rested >= self.settle_frames
+        self.rested[decide] = 0
+        return decide
+
     def step(self, world: np.ndarray, tracked: np.ndarray | None = None,
              forced: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Choice:
         """One frame: canonical world poses ``(B, n, 7)`` and whether each object is tracked
@@ -102,29 +136,28 @@ class Stepper:
             memory, self.state = net.remember(norm.history(f(x))[:, None], self.state)
             objects, context = net.read(norm, f(self.class_codes), f(world.astype(np.float32)), f(ee_in), f(flags),
                                         f(tracked), f(g), f(done), memory[:, 0])
+            decide = self._decide(world) if forced is None else np.ones(B, bool)
             log_tool = net.pi_tool(objects, context)
-            tool = log_tool.argmax(-1).numpy() if forced is None else forced[0]
+            tool = np.where(decide, log_tool.argmax(-1).numpy(), self._kept(0)) if forced is None else forced[0]
             tool_in = relative(world[rows, tool][:, None].repeat(n, 1), world).astype(np.float32)
             log_target = net.pi_target(objects, norm("tool_in_object", f(tool_in)), f(self.class_codes[tool]), context,
                                        f(tool))
-            target = log_target.argmax(-1).numpy() if forced is None else forced[1]
+            target = np.where(decide, log_target.argmax(-1).numpy(), self._kept(1)) if forced is None else forced[1]
             current = relative(world[rows, tool], world[rows, target]).astype(np.float32)
             pair_classes = f(np.concatenate([self.class_codes[tool], self.class_codes[target]], -1))
             pair_flags = f(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
-            w = norm.unscale("waypoint", net.pi_m(pair_classes, norm("current", f(current)), pair_flags, context)).numpy()
+            w = norm.unscale("waypoint", mixture_mode(net.pi_m(pair_classes, norm("current", f(current)), pair_flags,
+                                                                 context))).numpy()
             w = np.concatenate([w[:, :3], normalize_quat(w[:, 3:].astype(np.float64))], -1).astype(np.float32)
             if forced is not None:
                 w = forced[2].astype(np.float32)
             elif self.prev is not None:
-                same = (tool == self.prev[0]) & (target == self.prev[1])
-                at = way_length(remaining_way(current, self.prev[2])) < self.arrive_m
-                self.rested = np.where(same & at, self.rested + 1, 0)
-                hold = same & (self.rested < self.settle_frames)
-                self.rested[~hold] = 0
-                w = np.where(hold[:, None], self.prev[2], w)
+                w = np.where(decide[:, None], w, self.prev[2])
             remaining = remaining_way(current, w).astype(np.float32)
             action, _ = net.pi_l(pair_classes, norm("current", f(current)), norm("waypoint", f(w)),
                                  norm("remaining", f(remaining)), f(remaining))
         self.prev2_pair = None if self.prev is None else (self.prev[0], self.prev[1])
         self.prev = (tool, target, w)
-        return Choice(tool, target, w, action.numpy(), log_tool.numpy(), log_target.numpy())
+        self.prev_current = current
+        self.remaining = way_length(remaining.astype(np.float64))
+        return Choice(tool, target, w, action.numpy(), log_tool.numpy(), log_target.numpy(), decide)

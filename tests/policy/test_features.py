@@ -62,3 +62,24 @@ def test_lost_objects_leave_their_frames_out_of_the_losses():
     involved = (lab.tool == 1) | (lab.target == 1)
     np.testing.assert_array_equal(s.labelled, ~(np.isin(np.arange(20), [5, 6, 7]) & involved))
     assert not s.acted[4] or not involved[4]
+
+
+def test_a_sub_task_ends_where_its_tool_has_rested_settle_frames_as_the_stepper_decides():
+    """The end-effector (tool) reaches object 1 by frame 10, rests there until frame 20, then
+    reaches object 2: the switch moves from 20 to frame 10 + 3; the rest is waiting."""
+    H = 30
+    world = np.zeros((H, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 1, :3] = [0.3, 0.0, 0.0]
+    world[:, 2, :3] = [0.0, 0.3, 0.0]
+    x = np.concatenate([np.linspace(0, 0.3, 11), np.full(10, 0.3), np.linspace(0.3, 0.0, 9)])
+    y = np.concatenate([np.zeros(21), np.linspace(0.0, 0.3, 9)])
+    world[:, 0, 0], world[:, 0, 1] = x, y
+    target = np.where(np.arange(H) < 20, 1, 2)
+    k = np.where(np.arange(H) < 20, 10, H - 1)
+    s = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2, 0.002, 3)
+    np.testing.assert_array_equal(s.target, np.where(np.arange(H) < 13, 1, 2))
+    np.testing.assert_array_equal(np.flatnonzero(s.decision), [0, 13])
+    np.testing.assert_array_equal(np.flatnonzero(~s.acted[:-1]), np.arange(10, 20))  # resting is not π_l's to imitate
+    unchanged = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2)
+    np.testing.assert_array_equal(unchanged.target, target)
