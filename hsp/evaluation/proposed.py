@@ -63,8 +63,13 @@ class HierarchyRunner:
         self.stepper = Stepper(self.policy, 1)
         self.trace: list[dict[str, np.ndarray | int]] = []
 
+    def canonical(self, poses: np.ndarray) -> np.ndarray:
+        """World poses ``(n, 7)`` with symmetric objects' orientations made canonical by the
+        equivalent chosen at the episode's first frame (as training poses are)."""
+        return canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
+
     def act(self, poses: np.ndarray) -> np.ndarray:
-        world = canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
+        world = self.canonical(poses)
         history = self.stepper.prev
         choice = self.stepper.step(world[None])
         tool, target = int(choice.tool[0]), int(choice.target[0])

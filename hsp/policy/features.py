@@ -66,9 +66,10 @@ class Steps:
     labelled: np.ndarray
     """Frames whose tool and target are tracked ``(H,)`` bool: the only ones the losses use."""
     decision: np.ndarray
-    """Frames where a way-point is chosen ``(H,)`` bool: the first, and every frame whose tool,
-    target or way-point differs from the frame before (the only frames π_m is trained on,
-    as the only ones where it is asked: see :class:`~hsp.policy.stepper.Stepper`)."""
+    """Decision frames ``(H,)`` bool: the first, and every frame whose tool, target or
+    way-point differs from the frame before; the only frames π_h and π_m are trained on,
+    as a sub-task ends only where its tool comes to rest (:func:`decisions`,
+    :class:`~hsp.policy.stepper.Stepper`)."""
     acted: np.ndarray
     """Frames whose step to t+1 is observed (both tracked at t and t+1) ``(H,)`` bool."""
 
@@ -141,7 +142,9 @@ def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_in
               settle_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Labels ``(H,)`` each as a robot acts on them: a sub-task ends where its tool, having
     moved, comes to rest, and the next one is chosen once it has rested ``settle_frames``
-    frames, which is the rule the :class:`~hsp.policy.stepper.Stepper` runs by. So the frames
+    frames, as the :class:`~hsp.policy.stepper.Stepper` decides running (it also ends a
+    sub-task where the tool stops short of its way-point, which a demonstrator's rest at
+    the labelled way-point is; a segment without such a rest keeps its switch). So the frames
     a demonstrator rested beyond that before moving on go to the next sub-task (tool, target
     and way-point frame k); the frames whose step is the rest are marked ``waiting``.
 

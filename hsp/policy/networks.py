@@ -151,7 +151,6 @@ class Hierarchy(nn.Module):
         out = out.unflatten(-1, (self.sizes.modes, 15))
         return torch.log_softmax(out[..., 0], -1), out[..., 1:8], out[..., 8:].clamp(*LOG_STD_RANGE)
 
-
     def pi_l(self, classes: torch.Tensor, current: torch.Tensor, waypoint: torch.Tensor, remaining: torch.Tensor,
              remaining_raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean (physical units, a fraction of ``remaining_raw`` per axis) and log-σ (in the

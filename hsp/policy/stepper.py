@@ -8,16 +8,18 @@ Given ``forced`` choices (the labels), it reproduces the teacher-forced batch co
 of training exactly (tested), so what is trained is what runs.
 
 A sub-task runs until its tool has come to rest at its way-point: the pair and the
-way-point hold until, for ``policy.settle_frames`` frames in a row, the tool either is
-within ``policy.arrive_m`` of w_{t−1} (reached), or moves less than ``policy.still_m``
-while its remaining way shrinks by less than half the least fraction π_l's step covers
-(stopped short: something holds it, the way-point is not quite reachable, or the tool was
-not grasped). Only then, and at the first
-frame, are π_h and π_m asked for the next tool, target and way-point; they are trained on
-exactly those frames (the labels' decisions, :func:`~hsp.policy.features.decisions`, end a
-sub-task where the demonstrator's tool came to rest at its way-point). A slow step far
-from w_t is neither, so a low level that crawls does not end its sub-task early. Between
-decisions the LSTM still reads the history every frame, as in training.
+way-point hold until, for ``policy.settle_frames`` frames in a row, the tool moves less
+than ``policy.still_m`` and either is within ``policy.arrive_m`` of w_{t−1} (reached) or
+its remaining way shrinks by less than half the least fraction π_l's step covers (stopped
+short: something holds it, the way-point is not quite reachable, or the tool was not
+grasped). Only then, and at the first frame, are π_h and π_m asked for the next tool,
+target and way-point; they are trained on exactly those frames (the labels' decisions,
+:func:`~hsp.policy.features.decisions`, end a sub-task where the demonstrator's tool came
+to rest at its way-point). A slow step far from w_t is neither, so a low level that
+crawls does not end its sub-task early. Over a recording (free-running validation), a
+demonstrator who rests long after a decision is taken as stopped short again every
+``settle_frames`` frames. Between decisions the LSTM still reads the history every
+frame, as in training.
 """
 
 from __future__ import annotations
@@ -103,16 +105,16 @@ class Stepper:
     def _decide(self, world: np.ndarray) -> np.ndarray:
         """Whether the sub-task is over at this frame ``(B,)``: the first frame, or the tool
         has now been at rest at its way-point (reached, or stopped short) for
-        ``settle_frames`` frames."""
+        ``settle_frames`` frames, counting this one."""
         if self.prev is None:
             return np.ones(self.B, bool)
         rows = np.arange(self.B)
         current = relative(world[rows, self.prev[0]], world[rows, self.prev[1]])
         remaining = way_length(remaining_way(current, self.prev[2]))
         reached = remaining < self.arrive_m
-        moved = way_length(remaining_way(self.prev_current, current))
-        stopped = (moved < self.still_m) & (remaining > self.shrink * self.remaining)
-        self.rested = np.where(reached | stopped, self.rested + 1, 0)
+        stopped = remaining > self.shrink * self.remaining
+        rest = (way_length(remaining_way(self.prev_current, current)) < self.still_m) & (reached | stopped)
+        self.rested = np.where(rest, self.rested + 1, 0)
         decide = self.rested >= self.settle_frames
         self.rested[decide] = 0
         return decide

@@ -5,10 +5,11 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
 * L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool;
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
   error: :mod:`~hsp.policy.networks` says why);
-* both on the decision frames only, where a sub-task has ended and the next tool, target
-  and way-point are chosen: a sub-task runs until its tool comes to rest
-  (:class:`~hsp.policy.stepper.Stepper`), so these are the only frames where π_h and π_m
-  are asked (elsewhere, repeating the previous choice would be all they learnt);
+* all three on the decision frames only (the paper sums L_o+ and L_o* over every frame),
+  where a sub-task has ended and the next tool, target and way-point are chosen: a
+  sub-task runs until its tool comes to rest (:class:`~hsp.policy.stepper.Stepper`), so
+  these are the only frames where π_h and π_m are asked (elsewhere, repeating the
+  previous choice would be all they learnt);
 * L_action: −log π_l(a_t), the action in units of its spread in the data;
 * L_mem: ‖M(h_t) − M(h_{t−1})‖₂ where the tool, target and way-point did not change (h_t
   then holds nothing that h_{t−1} did not: the last entry repeats the one before);
@@ -48,7 +49,7 @@ log = logging.getLogger(__name__)
 FORMAT = 3
 """Layout of saved models; older ones are refused with a clear message."""
 WAYPOINT_HIT_M = 0.02
-"""A free-running way-point agrees with the label when within this (m)."""
+"""A way-point agrees with the label when within this (m)."""
 
 
 @dataclass(frozen=True)
@@ -70,8 +71,8 @@ class TrainConfig:
     validation_every: int = 5
     """Every this-many-th episode (the 5th, 10th, …) is held out to validate; 0: none."""
     checkpoint_every: int = 1000
-    """Iterations between free-running validations; the best checkpoint on the held-out
-    episodes is kept (the last iterate when nothing is held out)."""
+    """Iterations between validations on the held-out episodes; the checkpoint that decides
+    best there is kept (the last iterate when nothing is held out)."""
     still_m: float = 0.002
     """A tool moving less than this per frame relative to its target (translation plus
     0.05 m × angle) rests; tracking jitter is under 1 mm per frame. In the labels, the next
@@ -275,8 +276,9 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
             log.info("iteration %d: held out, decisions right %.3f (way-point %.1f mm); running free, pair %.3f", it,
                      figures["decision_subtask_accuracy"], figures["waypoint_error_mm_teacher_forced"],
                      figures["pair_accuracy_free"])
-            if best is None or figures["decision_subtask_accuracy"] > best[0]:
-                best = (figures["decision_subtask_accuracy"], it, copy.deepcopy(net.state_dict()), figures)
+            score = float(np.nan_to_num(figures["decision_subtask_accuracy"], nan=-1.0))  # no decision held out
+            if best is None or score > best[0]:
+                best = (score, it, copy.deepcopy(net.state_dict()), figures)
     if best is not None:
         net.load_state_dict(best[2])
         report |= {"checkpoint_iteration": best[1]} | {f"validation_{k}": v for k, v in best[3].items()}

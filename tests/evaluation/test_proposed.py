@@ -56,6 +56,21 @@ def test_the_history_is_the_runners_own_output(tasks):
         np.testing.assert_array_equal(w, before["waypoint"])
 
 
+def test_a_cube_turning_past_45_degrees_keeps_its_first_frames_equivalent(tasks):
+    """Made canonical frame by frame, a cube turning from 40° to 50° about z would jump a
+    quarter turn in its target's frame; the runner keeps the first frame's choice."""
+    from hsp.geometry import rotation_angle_deg
+
+    task = tasks["stacking-1"]
+    runner = HierarchyRunner(untrained_policy(task), task)
+    poses = np.tile([0.5, 0.0, 0.02, 0.0, 0.0, 0.0, 1.0], (len(task.objects), 1))
+    poses[2, 3:] = Rotation.from_euler("z", 40, degrees=True).as_quat()
+    runner.reset(poses, 0)
+    before = runner.canonical(poses)[2, 3:]
+    poses[2, 3:] = Rotation.from_euler("z", 50, degrees=True).as_quat()
+    assert abs(rotation_angle_deg(before, runner.canonical(poses)[2, 3:]) - 10.0) < 1e-6
+
+
 def test_the_labelled_step_commands_the_next_pose(tasks):
     """π_l's step (a frame's small motion), converted to a command for the hand holding a
     block, puts the hand where it must be for the block to make that step."""

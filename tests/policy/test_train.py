@@ -21,8 +21,9 @@ def _data():
 
 
 def _blank_policy(data, seed=0) -> Policy:
-    """Random hidden layers, every output layer zero: uniform π_h, π_m's w at the data's
-    mean, π_l at half the remaining way with unit spread, retrieval uniform."""
+    """Random hidden layers, every output layer zero: uniform π_h, π_m's components all at
+    the data's mean with unit spread, π_l half-way between its least fraction and the
+    whole remaining way with unit spread, retrieval uniform."""
     torch.manual_seed(seed)
     net = Hierarchy(Sizes(3, 2))
     with torch.no_grad():
@@ -106,7 +107,8 @@ def test_the_checkpoint_kept_is_the_best_on_held_out_episodes():
     policy, report = train(data, OBJECTS, CLASSES, 2, TrainConfig(iterations=60, batch_steps=40, learning_rate=3e-3,
                                                                    checkpoint_every=20), seed=0, held_out=data[:1])
     assert report["checkpoint_iteration"] in (20, 40, 60)
-    assert report["validation_free_subtask_accuracy"] == pytest.approx(validate(policy, data[:1])["free_subtask_accuracy"])
+    assert report["validation_decision_subtask_accuracy"] == pytest.approx(
+        validate(policy, data[:1])["decision_subtask_accuracy"])
 
 
 def test_save_and_load_give_the_same_policy(tmp_path):
