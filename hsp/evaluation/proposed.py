@@ -1,9 +1,9 @@
 """``proposed`` (and ``supervised``): π_h, π_m and π_l run closed loop on their own history.
 
 Per control step, from the observed world poses (symmetric objects' orientations made
-canonical as in training: the equivalent chosen at the episode's first frame is kept, so a
-cube turning past 45° does not jump by a quarter turn in its target's frame): the history is the tools, targets and way-points this runner
-chose itself (never labels), the LSTM keeping its state across steps; π_h's most likely
+canonical as in training: the equivalent chosen at the episode's first frame is kept, so
+a cube turning past 45° does not jump by a quarter turn in its target's frame): the
+history is the tools, targets and way-points this runner chose itself (never labels), the LSTM keeping its state across steps; π_h's most likely
 tool, then its most likely target given that tool, π_m's way-point w_t and π_l's mean
 action a_t, the tool's step in the target's frame. The step is turned into a command for the
 tool-centre point through the tool's current grasp when the tool is an object, and the

@@ -66,9 +66,8 @@ class Steps:
     labelled: np.ndarray
     """Frames whose tool and target are tracked ``(H,)`` bool: the only ones the losses use."""
     decision: np.ndarray
-    """Decision frames ``(H,)`` bool: the first, and every frame whose tool, target or
-    way-point differs from the frame before; the only frames π_h and π_m are trained on,
-    as a sub-task ends only where its tool comes to rest (:func:`decisions`,
+    """Decision frames ``(H,)`` bool (:func:`new_choices`): the only frames π_h and π_m are
+    trained on, as a sub-task ends only where its tool comes to rest (:func:`decisions`,
     :class:`~hsp.policy.stepper.Stepper`)."""
     acted: np.ndarray
     """Frames whose step to t+1 is observed (both tracked at t and t+1) ``(H,)`` bool."""
@@ -138,6 +137,14 @@ def memory_input(tool: np.ndarray, target: np.ndarray, waypoint: np.ndarray, cla
     return out
 
 
+def new_choices(tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray) -> np.ndarray:
+    """Frames ``(H,)`` bool where a tool, target and way-point are chosen: the first, and
+    every frame whose tool, target or way-point frame k differs from the frame before."""
+    out = np.ones(len(tool), bool)
+    out[1:] = (tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (waypoint_index[1:] != waypoint_index[:-1])
+    return out
+
+
 def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray, still_m: float,
               settle_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Labels ``(H,)`` each as a robot acts on them: a sub-task ends where its tool, having
@@ -158,8 +165,7 @@ def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_in
     moving = way_length(remaining_way(rel[np.maximum(t - 1, 0), tool, target], rel[t, tool, target])) >= still_m
     tool, target, k = tool.copy(), target.copy(), waypoint_index.copy()
     waiting = np.zeros(H, bool)
-    change = np.flatnonzero((tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (k[1:] != k[:-1])) + 1
-    starts = np.concatenate([[0], change, [H]])
+    starts = np.append(np.flatnonzero(new_choices(tool, target, k)), H)
     for s0, s in zip(starts[:-2], starts[1:-1]):
         moved = np.flatnonzero(moving[s0 + 1:s])
         if not moved.size:
@@ -199,8 +205,6 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
     if H > 1:  # the same pair's relative pose one frame on, as the low level would have to command it
         action[:-1] = rotvec_delta(current[:-1], rel[t[1:], tool[:-1], target[:-1]])
         acted[:-1] = labelled[:-1] & tracked[t[1:], tool[:-1]] & tracked[t[1:], target[:-1]] & ~waiting[:-1]
-    decision = np.ones(H, bool)
-    decision[1:] = (tool[1:] != tool[:-1]) | (target[1:] != target[:-1]) | (waypoint_index[1:] != waypoint_index[:-1])
     f32 = np.float32
     return Steps(
         world=world.astype(f32), ee_in_object=rel[:, 0].astype(f32), tool_in_object=rel[t, tool].astype(f32),
@@ -209,7 +213,7 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         tracked=tracked.astype(bool), tool=tool.astype(np.int64), target=target.astype(np.int64),
         current=current.astype(f32), waypoint=waypoint.astype(f32),
         remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
-        labelled=labelled, decision=decision, acted=acted)
+        labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
 
 
 STEP_FIELDS = tuple(f.name for f in fields(Steps))

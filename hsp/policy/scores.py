@@ -2,15 +2,15 @@
 
 π_h scores the pairs, log π(o+) + log π(o* | o+), and π_m the way-points in place of the
 priors (π_m's mixture density of each candidate); π_l's term stays the prior's
-straight-line step. π_h chooses only where a sub-task
-ends (:class:`~hsp.policy.stepper.Stepper`), and so does π_m: their scores count at the
+straight-line step. π_h chooses only where a sub-task ends
+(:class:`~hsp.policy.stepper.Stepper`), and so does π_m: their scores count at the
 previous round's decision frames only; elsewhere π_h's are uniform (the transition's γ
 keeps the pair) and the way-points' are the prior's (on another scale: π_m's density in
 standardised units can exceed the prior's, which pulls way-points toward the previous
-decisions; EM as Algorithm 1 is not finished). The memory and
-history inputs come from the labels of the previous round: the history of a state depends
-on the path that reached it, which a Viterbi recursion cannot carry, so the previous
-labels stand in for it.
+decisions; EM as Algorithm 1 is not finished). The memory and history inputs come from
+the labels of the previous round: the history of a state depends on the path that
+reached it, which a Viterbi recursion cannot carry, so the previous labels stand in for
+it.
 """
 
 from __future__ import annotations

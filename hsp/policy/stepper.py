@@ -57,8 +57,7 @@ class Choice:
 class Stepper:
     """Batched one-frame steps of a trained policy (``policy.net``, ``policy.norm``,
     ``policy.classes``, ``policy.n_classes``, ``policy.arrive_m``, ``policy.still_m``,
-    ``policy.settle_frames``)
-    over ``batch`` episodes."""
+    ``policy.settle_frames``) over ``batch`` episodes."""
 
     def __init__(self, policy, batch: int = 1) -> None:
         self.net, self.norm = policy.net, policy.norm

@@ -282,8 +282,8 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     if best is not None:
         net.load_state_dict(best[2])
         report |= {"checkpoint_iteration": best[1]} | {f"validation_{k}": v for k, v in best[3].items()}
-    return Policy(net.eval(), policy.norm, objects, np.asarray(classes), n_classes, cfg.arrive_m,
-                    cfg.still_m, cfg.settle_frames), report
+    net.eval()
+    return policy, report
 
 
 def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
