@@ -57,7 +57,7 @@ class PolicyScores:
             pair_classes = torch.cat([codes[i], codes[j]], -1).expand(self.H, -1, -1)
             pair_flags = torch.cat([flags[:, i], flags[:, j]], -1)
             self._mixture = net.pi_m(pair_classes, norm("current", torch.from_numpy(rel)), pair_flags,
-                                     context[:, None].expand(-1, self.P, -1))  # (H, P, K) and (H, P, K, 7)
+                                     norm("waypoint", torch.from_numpy(rel)))  # (H, P, 2K) and (H, P, 2K, 7)
             self._candidates = norm("waypoint", torch.from_numpy(rel)).transpose(0, 1)  # (P, H, 7), standardised
         self._allowed = self.prior.candidates()
 

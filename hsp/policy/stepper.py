@@ -148,7 +148,7 @@ class Stepper:
             pair_classes = f(np.concatenate([self.class_codes[tool], self.class_codes[target]], -1))
             pair_flags = f(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
             w = norm.unscale("waypoint", mixture_mode(net.pi_m(pair_classes, norm("current", f(current)), pair_flags,
-                                                                 context))).numpy()
+                                                                 norm("waypoint", f(current))))).numpy()
             w = np.concatenate([w[:, :3], normalize_quat(w[:, 3:].astype(np.float64))], -1).astype(np.float32)
             if forced is not None:
                 w = forced[2].astype(np.float32)

@@ -46,7 +46,7 @@ from hsp.policy.stepper import Stepper
 
 log = logging.getLogger(__name__)
 
-FORMAT = 3
+FORMAT = 4
 """Layout of saved models; older ones are refused with a clear message."""
 WAYPOINT_HIT_M = 0.02
 """A way-point agrees with the label when within this (m)."""
@@ -66,8 +66,9 @@ class TrainConfig:
     memory: int = 32
     min_fraction: float = 0.05
     """π_l's mean step covers at least this fraction of the remaining way (per axis)."""
-    modes: int = 3
-    """Components of π_m's mixture over way-points."""
+    modes: int = 2
+    """Components of π_m's mixture over way-points in the target's frame, and as many at
+    the tool's current pose."""
     validation_every: int = 5
     """Every this-many-th episode (the 5th, 10th, …) is held out to validate; 0: none."""
     checkpoint_every: int = 1000
@@ -131,7 +132,7 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     gather = lambda x, i: x.gather(2, i[..., None, None].expand(B, T, 1, x.shape[-1]))[:, :, 0]  # noqa: E731
     pair_flags = torch.cat([gather(b["flags"], tool), gather(b["flags"], target)], -1)
     current = norm("current", b["current"])
-    mixture = net.pi_m(pair_classes, current, pair_flags, context)
+    mixture = net.pi_m(pair_classes, current, pair_flags, norm("waypoint", b["current"]))
     action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
                                b["remaining"])
     return {"memory": memory, "objects": objects, "context": context, "log_tool": log_tool, "log_target": log_target,

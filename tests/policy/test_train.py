@@ -8,7 +8,7 @@ from hsp.errors import HspError
 from hsp.policy.networks import LOG_SQRT_2PI, Hierarchy, Sizes
 from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper
-from hsp.policy.train import Policy, TrainConfig, batch, forward, load, losses, save, split, train, validate
+from hsp.policy.train import FORMAT, Policy, TrainConfig, batch, forward, load, losses, save, split, train, validate
 from hsp.policy.features import episode_steps
 from tests.labeling.test_em import _episode
 from tests.policy.test_features import CLASSES, _steps
@@ -21,8 +21,8 @@ def _data():
 
 
 def _blank_policy(data, seed=0) -> Policy:
-    """Random hidden layers, every output layer zero: uniform π_h, π_m's components all at
-    the data's mean with unit spread, π_l half-way between its least fraction and the
+    """Random hidden layers, every output layer zero: uniform π_h, π_m's components at the
+    data's mean and at the tool's pose with unit spread, π_l half-way between its least fraction and the
     whole remaining way with unit spread, retrieval uniform."""
     torch.manual_seed(seed)
     net = Hierarchy(Sizes(3, 2))
@@ -46,9 +46,12 @@ def test_each_loss_term_has_its_hand_computed_value():
     # (tool = ee) or 1 (tool = a) allowed
     assert got["tool"] == pytest.approx(np.log(3), abs=1e-5)
     assert got["target"] == pytest.approx(np.mean(np.where(s.tool[s.decision] == 0, np.log(2), 0.0)), abs=1e-5)
-    # π_m's components all N(0, 1) in standardised units: the mixture is that one Gaussian
+    # π_m's components equally weighted with unit spread in standardised units, half at the
+    # data's mean, half at the tool's current pose p_t[o+, o*]
     w = std("waypoint", s.waypoint[s.decision])
-    assert got["waypoint"] == pytest.approx(np.mean(0.5 * (w**2).sum(1) + 7 * LOG_SQRT_2PI), rel=1e-4)
+    at_tool = std("waypoint", s.current[s.decision])
+    density = lambda d: np.exp(-0.5 * (d**2).sum(1) - 7 * LOG_SQRT_2PI)  # noqa: E731
+    assert got["waypoint"] == pytest.approx(np.mean(-np.log(0.5 * density(w) + 0.5 * density(w - at_tool))), rel=1e-4)
     assert 1 < s.decision.sum() < len(s) / 4
     scale = norm.stats["action.std"].numpy()
     lo = policy.net.sizes.min_fraction  # π_l's output zero: half-way between the floor and the whole way
@@ -131,7 +134,7 @@ def test_bad_inputs_are_clear_errors(tmp_path):
     policy, _ = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=1, batch_steps=40), seed=0)
     save(policy, TrainConfig(iterations=1), tmp_path / "old")
     config = tmp_path / "old" / "config.json"
-    config.write_text(config.read_text().replace('"format": 3', '"format": 1'))
+    config.write_text(config.read_text().replace(f'"format": {FORMAT}', '"format": 1'))
     with pytest.raises(HspError, match="model format 1"):
         load(tmp_path / "old")
     with pytest.raises(HspError, match="iterations"):
