@@ -137,7 +137,7 @@ class Stepper:
             memory, self.state = net.remember(norm.history(f(x))[:, None], self.state)
             objects, context = net.read(norm, f(self.class_codes), f(world.astype(np.float32)), f(ee_in), f(flags),
                                         f(tracked), f(g), f(done), memory[:, 0])
-            decide = self._decide(world) if forced is None else np.ones(B, bool)
+            decide = self._decide(world)
             log_tool = net.pi_tool(objects, context)
             tool = np.where(decide, log_tool.argmax(-1).numpy(), self._kept(0)) if forced is None else forced[0]
             tool_in = relative(world[rows, tool][:, None].repeat(n, 1), world).astype(np.float32)

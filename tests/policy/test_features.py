@@ -64,19 +64,27 @@ def test_lost_objects_leave_their_frames_out_of_the_losses():
     assert not s.acted[4] or not involved[4]
 
 
-def test_a_sub_task_ends_where_its_tool_has_rested_settle_frames_as_the_stepper_decides():
-    """The end-effector (tool) reaches object 1 by frame 10, rests there until frame 20, then
-    reaches object 2: the switch moves from 20 to frame 10 + 3; the rest is waiting."""
-    H = 30
+def reach_rest_reach(rest: int = 10, tremor_m: float = 0.0, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The end-effector (tool) reaches object 1 by frame 10, rests there ``rest`` frames, then
+    reaches object 2 (a hand's tremor of ``tremor_m`` per axis on top): world poses and the
+    demonstrator's labels, target and way-point frame, switching at frame 10 + ``rest``."""
+    x = np.concatenate([np.linspace(0, 0.3, 11), np.full(rest, 0.3), np.linspace(0.3, 0.0, 9)])
+    y = np.concatenate([np.zeros(11 + rest), np.linspace(0.0, 0.3, 9)])
+    H = len(x)
     world = np.zeros((H, 3, 7))
     world[..., 6] = 1.0
     world[:, 1, :3] = [0.3, 0.0, 0.0]
     world[:, 2, :3] = [0.0, 0.3, 0.0]
-    x = np.concatenate([np.linspace(0, 0.3, 11), np.full(10, 0.3), np.linspace(0.3, 0.0, 9)])
-    y = np.concatenate([np.zeros(21), np.linspace(0.0, 0.3, 9)])
     world[:, 0, 0], world[:, 0, 1] = x, y
-    target = np.where(np.arange(H) < 20, 1, 2)
-    k = np.where(np.arange(H) < 20, 10, H - 1)
+    world[:, 0, :3] += np.random.default_rng(seed).normal(0.0, tremor_m, (H, 3))
+    switch = 10 + rest
+    return world, np.where(np.arange(H) < switch, 1, 2), np.where(np.arange(H) < switch, 10, H - 1)
+
+
+def test_a_sub_task_ends_where_its_tool_has_rested_settle_frames_as_the_stepper_decides():
+    """The switch moves from 20 to frame 10 + 3; the rest is waiting."""
+    world, target, k = reach_rest_reach()
+    H = len(world)
     s = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2, 0.002, 3)
     np.testing.assert_array_equal(s.target, np.where(np.arange(H) < 13, 1, 2))
     np.testing.assert_array_equal(np.flatnonzero(s.decision), [0, 13])

@@ -4,7 +4,8 @@ import numpy as np
 
 from hsp.policy.stepper import Stepper
 from hsp.policy.train import TrainConfig, train
-from tests.policy.test_features import CLASSES, _steps
+from hsp.policy.features import episode_steps
+from tests.policy.test_features import CLASSES, _steps, reach_rest_reach
 
 
 def test_choices_hold_while_the_tool_moves_and_are_made_again_once_it_has_rested():
@@ -27,3 +28,20 @@ def test_choices_hold_while_the_tool_moves_and_are_made_again_once_it_has_rested
         np.testing.assert_array_equal(c.waypoint[0], first.waypoint[0])
     c = stepper.step(moving[-1:])  # ... and is over at the last
     assert c.decided[0] and stepper.rested[0] == 0
+
+
+def test_stepped_over_its_labels_the_stepper_ends_each_sub_task_where_the_labels_do():
+    """A demonstrator with a hand's tremor (0.3 mm per axis) who rests as long as the robot
+    waits: the rest rule running fires at the decision frames of the labels
+    (:func:`~hsp.policy.features.decisions`), so π_h and π_m are asked where they were
+    trained to answer. (A longer rest is taken running as stopping short again every
+    ``settle_frames``; the robot never rests longer.)"""
+    world, target, k = reach_rest_reach(rest=3, tremor_m=0.0003)
+    H = len(world)
+    policy, _ = train([_steps()[2]], ["ee", "a", "b"], CLASSES, 2, TrainConfig(iterations=1, batch_steps=40), seed=0)
+    s = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2, policy.still_m,
+                      policy.settle_frames)
+    stepper = Stepper(policy, 1)
+    decided = [stepper.step(world[t:t + 1], forced=(s.tool[t:t + 1], s.target[t:t + 1], s.waypoint[t:t + 1])).decided[0]
+               for t in range(H - 1)]  # the last frame: the recording ends, not the sub-task
+    np.testing.assert_array_equal(np.flatnonzero(decided), np.flatnonzero(s.decision[:-1]))
