@@ -23,7 +23,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from hsp.geometry import rotvec_delta
+from scipy.spatial.transform import Rotation
+
+from hsp.geometry import compose, rotvec_delta
 from hsp.labeling.priors import relative_poses
 
 FLAGS = 3
@@ -214,6 +216,16 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         current=current.astype(f32), waypoint=waypoint.astype(f32),
         remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
         labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
+
+
+def turned_about_vertical(poses: np.ndarray, target_world: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Poses in a target's frame ``(..., 7)`` as they would be had the scene turned by
+    ``angle`` ``(...)`` (rad) about the world's vertical through the target, whose world
+    pose is ``target_world`` ``(..., 7)``: the same relative geometry from another heading."""
+    up = Rotation.from_quat(target_world[..., 3:].reshape(-1, 4)).inv().apply([0.0, 0.0, 1.0])  # in the target's frame
+    turn = np.zeros(up.shape[:1] + (7,))
+    turn[:, 3:] = Rotation.from_rotvec(up * np.reshape(angle, (-1, 1))).as_quat()
+    return compose(turn.reshape(poses.shape), poses)
 
 
 STEP_FIELDS = tuple(f.name for f in fields(Steps))

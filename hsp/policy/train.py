@@ -4,7 +4,8 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
 
 * L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool;
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
-  error: :mod:`~hsp.policy.networks` says why);
+  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t turned about the
+  vertical through the target by a random angle per episode (``turn_waypoints``);
 * all three on the decision frames only (the paper sums L_o+ and L_o* over every frame),
   where a sub-task has ended and the next tool, target and way-point are chosen: a
   sub-task runs until its tool comes to rest (:class:`~hsp.policy.stepper.Stepper`), so
@@ -39,7 +40,7 @@ from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
-from hsp.policy.features import STEP_FIELDS, Steps, one_hot
+from hsp.policy.features import STEP_FIELDS, Steps, one_hot, turned_about_vertical
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob, mixture_mode
 from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper
@@ -83,6 +84,11 @@ class TrainConfig:
     """... and running, once the tool has been within this of its way-point, or stopped
     short of it, ``settle_frames`` frames in a row (:class:`~hsp.policy.stepper.Stepper`)."""
     settle_frames: int = 3
+    turn_waypoints: bool = True
+    """π_m learns from every decision turned by a random angle about the world's vertical
+    through its target (:func:`~hsp.policy.features.turned_about_vertical`): a tabletop
+    task is the same from every heading, and a few dozen demonstrations show few of them
+    (held-out stacking-1 way-points within 5 mm: 0.75 → 0.93 in a π_m-only trial)."""
 
 
 @dataclass
@@ -117,8 +123,26 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.where(mask, x, 0.0).sum() / mask.sum().clamp(min=1)
 
 
+def turned(b: dict[str, torch.Tensor], rng: np.random.Generator) -> dict[str, torch.Tensor]:
+    """π_m's input p_t[o+, o*] and label w_t of batch ``b``, each episode turned by its own
+    random angle about the world's vertical through the target (``turned_current``,
+    ``turned_waypoint``), beside the rest of ``b``."""
+    B, T = b["tool"].shape
+    real = b["frame"].numpy()
+    target_world = b["world"].gather(2, b["target"][..., None, None].expand(B, T, 1, 7))[:, :, 0].numpy()[real]
+    angle = np.repeat(rng.uniform(-np.pi, np.pi, (B, 1)), T, 1)[real]
+
+    def f(x: torch.Tensor) -> torch.Tensor:
+        out = x.numpy().copy()
+        out[real] = turned_about_vertical(out[real], target_world, angle)
+        return torch.from_numpy(out)
+
+    return b | {"turned_current": f(b["current"]), "turned_waypoint": f(b["waypoint"])}
+
+
 def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Every output of the hierarchy on a batch with its labelled history (teacher forcing)."""
+    """Every output of the hierarchy on a batch with its labelled history (teacher forcing);
+    π_m reads ``turned_current`` where the batch has it (:func:`turned`)."""
     net, norm = policy.net, policy.norm
     codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
     B, T = b["world"].shape[:2]
@@ -132,7 +156,8 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     gather = lambda x, i: x.gather(2, i[..., None, None].expand(B, T, 1, x.shape[-1]))[:, :, 0]  # noqa: E731
     pair_flags = torch.cat([gather(b["flags"], tool), gather(b["flags"], target)], -1)
     current = norm("current", b["current"])
-    mixture = net.pi_m(pair_classes, current, pair_flags, norm("waypoint", b["current"]))
+    at = b.get("turned_current", b["current"])
+    mixture = net.pi_m(pair_classes, norm("current", at), pair_flags, norm("waypoint", at))
     action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
                                b["remaining"])
     return {"memory": memory, "objects": objects, "context": context, "log_tool": log_tool, "log_target": log_target,
@@ -148,7 +173,7 @@ def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
     acted = b["acted"] & b["frame"]
     tool_nll = -out["log_tool"].gather(-1, b["tool"][..., None])[..., 0]
     target_nll = -out["log_target"].gather(-1, b["target"][..., None])[..., 0]
-    w_nll = -mixture_log_prob(out["waypoint_mixture"], norm("waypoint", b["waypoint"]))
+    w_nll = -mixture_log_prob(out["waypoint_mixture"], norm("waypoint", b.get("turned_waypoint", b["waypoint"])))
     scale = norm.stats["action.std"]
     a_nll = -gaussian_log_prob(out["action"] / scale, out["action_log_std"], b["action"] / scale)
     # L_mem: M(h_t) keeps still while the history gains nothing new, i.e. while (o+, o*, w)
@@ -263,7 +288,8 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     for it in track(range(1, cfg.iterations + 1), description="train π_h, π_m, π_l"):
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
-        parts = losses(policy, batch(episodes, list(order[:take])))
+        b = batch(episodes, list(order[:take]))
+        parts = losses(policy, turned(b, rng) if cfg.turn_waypoints else b)
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()

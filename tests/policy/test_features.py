@@ -2,10 +2,12 @@
 
 import numpy as np
 
-from hsp.geometry import relative
+from scipy.spatial.transform import Rotation
+
+from hsp.geometry import compose, relative
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import episode_steps, history_flags
+from hsp.policy.features import episode_steps, history_flags, turned_about_vertical
 from tests.labeling.test_em import _episode
 
 CLASSES = np.array([0, 1, 1])
@@ -91,3 +93,18 @@ def test_a_sub_task_ends_where_its_tool_has_rested_settle_frames_as_the_stepper_
     np.testing.assert_array_equal(np.flatnonzero(~s.acted[:-1]), np.arange(10, 20))  # resting is not π_l's to imitate
     unchanged = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2)
     np.testing.assert_array_equal(unchanged.target, target)
+
+
+def test_a_turned_pose_is_the_scene_turned_about_the_vertical_through_the_target():
+    """Whatever the target's tilt, turning p[i, j] by θ is turning object i's world pose by θ
+    about the world's z axis through the target's origin."""
+    rng = np.random.default_rng(0)
+    target = np.concatenate([rng.uniform(-1, 1, (5, 3)), Rotation.random(5, random_state=1).as_quat()], 1)
+    tool = np.concatenate([rng.uniform(-1, 1, (5, 3)), Rotation.random(5, random_state=2).as_quat()], 1)
+    angle = rng.uniform(-np.pi, np.pi, 5)
+    got = compose(target, turned_about_vertical(relative(tool, target), target, angle))
+    turn = Rotation.from_euler("z", angle[:, None])
+    want = np.concatenate([target[:, :3] + turn.apply(tool[:, :3] - target[:, :3]),
+                           (turn * Rotation.from_quat(tool[:, 3:])).as_quat()], 1)
+    np.testing.assert_allclose(got[:, :3], want[:, :3], atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(got[:, 3:] * want[:, 3:], 1)), 1.0, atol=1e-9)
