@@ -218,14 +218,21 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
 
 
-def turned_about_vertical(poses: np.ndarray, target_world: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Poses in a target's frame ``(..., 7)`` as they would be had the scene turned by
-    ``angle`` ``(...)`` (rad) about the world's vertical through the target, whose world
-    pose is ``target_world`` ``(..., 7)``: the same relative geometry from another heading."""
-    up = Rotation.from_quat(target_world[..., 3:].reshape(-1, 4)).inv().apply([0.0, 0.0, 1.0])  # in the target's frame
-    turn = np.zeros(up.shape[:1] + (7,))
-    turn[:, 3:] = Rotation.from_rotvec(up * np.reshape(angle, (-1, 1))).as_quat()
-    return compose(turn.reshape(poses.shape), poses)
+def symmetric_turns(folds: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Angles (rad) of turns about a target's z axis that leave it unchanged, one per entry of
+    ``folds`` (its turns per revolution, :func:`~hsp.geometry.symmetry.z_folds`: 0 for a
+    continuous symmetry, 1 for none) drawn by ``u`` ∈ [0, 1) (same shape): 2πu, or the
+    multiple of 2π/folds that u falls on."""
+    k = np.asarray(folds)
+    return np.where(k == 0, 2 * np.pi * u, 2 * np.pi * np.floor(u * np.maximum(k, 1)) / np.maximum(k, 1))
+
+
+def turned_about_z(poses: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Poses in a target's frame ``(..., 7)`` as seen from the target turned by ``angle``
+    ``(...)`` about its own z axis: for a turn in its symmetry, the same scene."""
+    turn = np.zeros(np.shape(angle) + (7,))
+    turn[..., 3:] = Rotation.from_euler("z", np.reshape(angle, (-1, 1))).as_quat().reshape(turn.shape[:-1] + (4,))
+    return compose(turn, poses)
 
 
 STEP_FIELDS = tuple(f.name for f in fields(Steps))

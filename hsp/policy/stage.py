@@ -16,6 +16,7 @@ from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.labeling.em import Fit, ScoreModel, em_label
 from hsp.geometry import relative
+from hsp.geometry.symmetry import z_folds
 from hsp.labeling.label import EpisodeLabels, canonical_poses, prepared_poses
 from hsp.labeling.priors import PriorConfig
 from hsp.labeling.stage import WAYPOINT_COLUMNS
@@ -33,6 +34,11 @@ def semantic_classes(task: Task) -> tuple[np.ndarray, int]:
     (the four lug nuts share one)."""
     names = sorted({o.label for o in task.objects})
     return np.array([names.index(o.label) for o in task.objects]), len(names)
+
+
+def symmetry_folds(task: Task) -> np.ndarray:
+    """Per object, its turns about z per revolution that leave it unchanged (0: any)."""
+    return np.array([z_folds(o.symmetry) for o in task.objects])
 
 
 def read_labels(path: Path, lengths: list[int]) -> list[EpisodeLabels]:
@@ -124,7 +130,7 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     log.info("train %s: %d episodes (%d frames) from %s and %s, %d more held out to validate", task.name, len(fit_on),
              sum(len(steps[i]) for i in fit_on), dataset_dir, source, len(held))
     policy, figures = train([steps[i] for i in fit_on], task.names, classes, n_classes, cfg, seed,
-                            [steps[i] for i in held])
+                            [steps[i] for i in held], symmetry_folds(task))
     save(policy, cfg, out_dir)
     report: dict[str, float | int] = {"iterations": cfg.iterations, **figures, "episodes": len(fit_on),
                                       "frames": int(sum(len(steps[i]) for i in fit_on)), "validation_episodes": len(held)}
@@ -148,7 +154,8 @@ def em_fit(task: Task, policy: Policy, cfg: PriorConfig, train_cfg: TrainConfig,
         if given:
             return score_model(given.pop(), cfg)
         classes, n_classes = semantic_classes(task)
-        retrained, _ = train(labelled_steps(task, world, status, labels, train_cfg), task.names, classes, n_classes, train_cfg, seed)
+        retrained, _ = train(labelled_steps(task, world, status, labels, train_cfg), task.names, classes, n_classes,
+                             train_cfg, seed, folds=symmetry_folds(task))
         return score_model(retrained, cfg)
 
     return fit

@@ -4,8 +4,9 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
 
 * L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool;
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
-  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t turned about the
-  vertical through the target by a random angle per episode (``turn_waypoints``);
+  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from a
+  random symmetric equivalent of the target (a cube turned by a quarter turn looks the
+  same, so the demonstration could have been that one);
 * all three on the decision frames only (the paper sums L_o+ and L_o* over every frame),
   where a sub-task has ended and the next tool, target and way-point are chosen: a
   sub-task runs until its tool comes to rest (:class:`~hsp.policy.stepper.Stepper`), so
@@ -40,7 +41,7 @@ from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
-from hsp.policy.features import STEP_FIELDS, Steps, one_hot, turned_about_vertical
+from hsp.policy.features import STEP_FIELDS, Steps, one_hot, symmetric_turns, turned_about_z
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob, mixture_mode
 from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper
@@ -84,11 +85,6 @@ class TrainConfig:
     """... and running, once the tool has been within this of its way-point, or stopped
     short of it, ``settle_frames`` frames in a row (:class:`~hsp.policy.stepper.Stepper`)."""
     settle_frames: int = 3
-    turn_waypoints: bool = True
-    """π_m learns from every decision turned by a random angle about the world's vertical
-    through its target (:func:`~hsp.policy.features.turned_about_vertical`): a tabletop
-    task is the same from every heading, and a few dozen demonstrations show few of them
-    (held-out stacking-1 way-points within 5 mm: 0.75 → 0.93 in a π_m-only trial)."""
 
 
 @dataclass
@@ -123,18 +119,18 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.where(mask, x, 0.0).sum() / mask.sum().clamp(min=1)
 
 
-def turned(b: dict[str, torch.Tensor], rng: np.random.Generator) -> dict[str, torch.Tensor]:
-    """π_m's input p_t[o+, o*] and label w_t of batch ``b``, each episode turned by its own
-    random angle about the world's vertical through the target (``turned_current``,
-    ``turned_waypoint``), beside the rest of ``b``."""
+def turned(b: dict[str, torch.Tensor], folds: np.ndarray, rng: np.random.Generator) -> dict[str, torch.Tensor]:
+    """π_m's input p_t[o+, o*] and label w_t of batch ``b`` seen from a symmetric equivalent
+    of each target (a turn about its z axis that leaves it unchanged, one draw per episode;
+    ``folds`` per object, :func:`~hsp.policy.features.symmetric_turns`), as
+    ``turned_current`` and ``turned_waypoint`` beside the rest of ``b``."""
     B, T = b["tool"].shape
-    real = b["frame"].numpy()
-    target_world = b["world"].gather(2, b["target"][..., None, None].expand(B, T, 1, 7))[:, :, 0].numpy()[real]
-    angle = np.repeat(rng.uniform(-np.pi, np.pi, (B, 1)), T, 1)[real]
+    real = b["frame"].numpy()  # padding has no poses to turn
+    angle = symmetric_turns(folds[b["target"].numpy()], np.repeat(rng.random((B, 1)), T, 1))[real]
 
     def f(x: torch.Tensor) -> torch.Tensor:
         out = x.numpy().copy()
-        out[real] = turned_about_vertical(out[real], target_world, angle)
+        out[real] = turned_about_z(out[real], angle)
         return torch.from_numpy(out)
 
     return b | {"turned_current": f(b["current"]), "turned_waypoint": f(b["waypoint"])}
@@ -265,9 +261,12 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
 
 
 def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_classes: int, cfg: TrainConfig,
-          seed: int, held_out: list[Steps] | None = None) -> tuple[Policy, dict[str, float]]:
+          seed: int, held_out: list[Steps] | None = None, folds: np.ndarray | None = None
+          ) -> tuple[Policy, dict[str, float]]:
     """π_h, π_m, π_l fitted to labelled ``episodes``; with ``held_out`` episodes, the
-    checkpoint that decides best on them (``decision_subtask_accuracy``) is returned. Returns
+    checkpoint that decides best on them (``decision_subtask_accuracy``) is returned. With
+    ``folds`` (each object's turns about z that leave it unchanged), π_m also learns every
+    decision as seen from its target's symmetric equivalents (:func:`turned`). Returns
     the policy and a report: the last losses, and where a checkpoint was chosen, its
     iteration and validation figures."""
     if not episodes:
@@ -289,7 +288,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
         b = batch(episodes, list(order[:take]))
-        parts = losses(policy, turned(b, rng) if cfg.turn_waypoints else b)
+        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds), rng))
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()

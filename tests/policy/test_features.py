@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, relative
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import episode_steps, history_flags, turned_about_vertical
+from hsp.policy.features import episode_steps, history_flags, symmetric_turns, turned_about_z
 from tests.labeling.test_em import _episode
 
 CLASSES = np.array([0, 1, 1])
@@ -95,16 +95,24 @@ def test_a_sub_task_ends_where_its_tool_has_rested_settle_frames_as_the_stepper_
     np.testing.assert_array_equal(unchanged.target, target)
 
 
-def test_a_turned_pose_is_the_scene_turned_about_the_vertical_through_the_target():
-    """Whatever the target's tilt, turning p[i, j] by θ is turning object i's world pose by θ
-    about the world's z axis through the target's origin."""
+def test_a_turned_pose_is_the_tool_turned_about_the_targets_z_axis():
+    """Whatever the target's pose, p[i, j] seen from the target turned by θ about its z axis
+    is object i's world pose turned by θ about that axis through the target's origin."""
     rng = np.random.default_rng(0)
     target = np.concatenate([rng.uniform(-1, 1, (5, 3)), Rotation.random(5, random_state=1).as_quat()], 1)
     tool = np.concatenate([rng.uniform(-1, 1, (5, 3)), Rotation.random(5, random_state=2).as_quat()], 1)
     angle = rng.uniform(-np.pi, np.pi, 5)
-    got = compose(target, turned_about_vertical(relative(tool, target), target, angle))
-    turn = Rotation.from_euler("z", angle[:, None])
+    got = compose(target, turned_about_z(relative(tool, target), angle))
+    axis = Rotation.from_quat(target[:, 3:]).apply([0.0, 0.0, 1.0])
+    turn = Rotation.from_rotvec(axis * angle[:, None])
     want = np.concatenate([target[:, :3] + turn.apply(tool[:, :3] - target[:, :3]),
                            (turn * Rotation.from_quat(tool[:, 3:])).as_quat()], 1)
     np.testing.assert_allclose(got[:, :3], want[:, :3], atol=1e-9)
     np.testing.assert_allclose(np.abs(np.sum(got[:, 3:] * want[:, 3:], 1)), 1.0, atol=1e-9)
+
+
+def test_symmetric_turns_are_those_that_leave_the_target_unchanged():
+    u = np.array([0.0, 0.3, 0.6, 0.99])
+    np.testing.assert_allclose(symmetric_turns(np.full(4, 4), u), [0, np.pi / 2, np.pi, 3 * np.pi / 2])  # a cube
+    np.testing.assert_allclose(symmetric_turns(np.full(4, 1), u), 0.0)  # no symmetry: never turned
+    np.testing.assert_allclose(symmetric_turns(np.zeros(4), u), 2 * np.pi * u)  # a cylinder: any turn

@@ -16,8 +16,7 @@ from tests.policy.test_features import CLASSES, _steps
 
 def _policy(iterations=200):
     policy, _ = train([_steps()[2]] * 2, ["ee", "a", "b"], CLASSES, 2,
-                      TrainConfig(iterations=iterations, batch_steps=40, learning_rate=3e-3, turn_waypoints=False),
-                      seed=0)  # memorising one episode, not learning headings
+                      TrainConfig(iterations=iterations, batch_steps=40, learning_rate=3e-3), seed=0)
     return policy
 
 

@@ -73,8 +73,7 @@ def test_a_model_overfits_one_short_episode():
     target = np.where(np.arange(30) < 15, 1, 2)
     k = np.where(np.arange(30) < 15, 14, 29)
     data = [episode_steps(world, status == 0, np.zeros(30, np.int64), target, k, CLASSES, 2, 0.002, 3)]
-    cfg = TrainConfig(iterations=400, batch_steps=30, learning_rate=3e-3, turn_waypoints=False)  # memorise, as it is
-    policy, last = train(data, OBJECTS, CLASSES, 2, cfg, seed=0)
+    policy, last = train(data, OBJECTS, CLASSES, 2, TrainConfig(iterations=400, batch_steps=30, learning_rate=3e-3), seed=0)
     assert last["loss_tool"] < 0.1 and last["loss_target"] < 0.1 and last["loss_waypoint"] < 0.1
     figures = validate(policy, data)
     # running free, π_h is asked again at the final rest (frame 28, a state no label covers)
@@ -96,6 +95,20 @@ def test_the_stepper_with_the_labels_reproduces_the_training_forward_pass():
         np.testing.assert_allclose(c.log_tool[0], out["log_tool"][0, t].numpy(), atol=1e-4)
         np.testing.assert_allclose(c.log_target[0], out["log_target"][0, t].numpy(), atol=1e-4)
         np.testing.assert_allclose(c.action[0], out["action"][0, t].numpy(), atol=1e-6)
+
+
+def test_pi_m_learns_decisions_from_the_targets_symmetric_equivalents():
+    """With each object's symmetry, π_m's input and label are those of the target turned by
+    one of its symmetries (here the cylinder's any turn), so L_w changes; the rest does not."""
+    data = [_steps(40)[2], _steps(30)[2]]
+    cfg = TrainConfig(iterations=1, batch_steps=80, learning_rate=0.0)
+    _, plain = train(data, OBJECTS, CLASSES, 2, cfg, seed=0)
+    _, turned = train(data, OBJECTS, CLASSES, 2, cfg, seed=0, folds=np.array([1, 0, 0]))
+    _, unchanged = train(data, OBJECTS, CLASSES, 2, cfg, seed=0, folds=np.array([1, 1, 1]))
+    assert turned["loss_waypoint"] != pytest.approx(plain["loss_waypoint"], rel=1e-3)
+    assert unchanged["loss_waypoint"] == pytest.approx(plain["loss_waypoint"], rel=1e-5)
+    for term in ("tool", "target", "action", "memory", "retrieval"):
+        assert turned[f"loss_{term}"] == pytest.approx(plain[f"loss_{term}"], rel=1e-5)
 
 
 def test_the_same_seed_gives_the_same_weights():
