@@ -38,7 +38,7 @@ def main() -> None:
         world = random_walk(args.frames, n, e)
         lab = label_episode(world, np.zeros((args.frames, n), int), PriorConfig())
         steps.append(episode_steps(world, np.ones((args.frames, n), bool), lab.tool, lab.target, lab.waypoint_index,
-                                   classes, n))
+                                   classes, n, equivalent=lab.equivalent))
     cfg = TrainConfig(iterations=args.iterations, checkpoint_every=args.iterations)
     times = []
     for _ in range(args.repeats):

@@ -11,8 +11,8 @@ from hsp.dataset.features import TrackStatus
 from hsp.errors import HspError
 from hsp.geometry import relative
 from hsp.geometry.symmetry import canonical_orientations
+from hsp.labeling.equivalence import equivalent_targets
 from hsp.labeling.priors import PriorConfig, PriorScores, continuous_quaternions, pairs_of
-from hsp.labeling.ties import resolve_target_ties
 from hsp.labeling.viterbi import Scores, Transition, viterbi
 
 
@@ -26,6 +26,9 @@ class EpisodeLabels:
     """k per frame ``(H,)``: the frame whose relative pose is the way-point."""
     waypoint: np.ndarray
     """w = p_k[o+, o*] per frame ``(H, 7)``, in the target's frame."""
+    equivalent: np.ndarray
+    """Per frame, the objects the target cannot be told apart from ``(H, n)`` bool, o*
+    included (:mod:`~hsp.labeling.equivalence`); only o* where the labels are exact."""
 
 
 def canonical_poses(world: np.ndarray, symmetries: list[str]) -> np.ndarray:
@@ -68,8 +71,8 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     used as given.
 
     ``scores`` replaces the priors (EM with trained networks); it must use the pair order
-    of :func:`~hsp.labeling.priors.pairs_of`. Among targets rigid with each other over a
-    sub-task, the one the tool comes nearest at a way-point is kept (:mod:`~hsp.labeling.ties`).
+    of :func:`~hsp.labeling.priors.pairs_of`. The targets rigid with the labelled one over
+    its sub-task come with it as its equivalence set (:mod:`~hsp.labeling.equivalence`).
     """
     H, n = world.shape[:2]
     if H < 2:
@@ -81,5 +84,5 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
         world = prepared_poses(world, symmetries, cfg)
     path = viterbi(scores or PriorScores(world, ok, cfg), Transition(cfg.gamma, cfg.beta))
     tool, target = pairs_of(n)[path.pair].T
-    target = resolve_target_ties(world, ok, tool, target, path.k, cfg.rigid_m, cfg.rigid_deg)
-    return EpisodeLabels(tool, target, path.k, relative(world[path.k, tool], world[path.k, target]))
+    return EpisodeLabels(tool, target, path.k, relative(world[path.k, tool], world[path.k, target]),
+                         equivalent_targets(world, ok, tool, target, cfg.rigid_m, cfg.rigid_deg))

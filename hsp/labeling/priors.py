@@ -70,8 +70,9 @@ class PriorConfig:
     the arc of a point this far from the frame's origin (about an object's radius)."""
     rigid_m: float = 0.01
     """Objects whose relative position stays within this over a sub-task (in 90 % of the
-    frames) are rigid with each other there: the poses cannot tell which is the target
-    (:mod:`~hsp.labeling.ties`)."""
+    frames) are rigid with each other there: the poses cannot tell which is the target,
+    and they form its equivalence set (:mod:`~hsp.labeling.equivalence`). About a hand's
+    jitter of a held block under the tracker."""
     rigid_deg: float = 15.0
     """... and whose relative orientation stays within this (degrees)."""
     heading_median_frames: int = 15

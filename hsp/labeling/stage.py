@@ -26,18 +26,48 @@ from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
 WAYPOINT_COLUMNS = ["waypoint_x", "waypoint_y", "waypoint_z", "waypoint_qx", "waypoint_qy", "waypoint_qz", "waypoint_qw"]
+LABEL_COLUMNS = ["episode_index", "frame_index", "tool", "target", "waypoint_index", *WAYPOINT_COLUMNS, "equivalent"]
 
 
 def labels_frame(labels: list[EpisodeLabels]) -> pd.DataFrame:
-    """One row per frame: episode_index, frame_index, tool, target, waypoint_index, w (7)."""
+    """One row per frame: episode_index, frame_index, tool, target, waypoint_index, w (7)
+    and the target's equivalence set as a bit mask over object indices (``equivalent``)."""
     parts = []
     for e, lab in enumerate(labels):
-        H = len(lab.tool)
+        H, n = lab.equivalent.shape
         df = pd.DataFrame({"episode_index": np.full(H, e), "frame_index": np.arange(H), "tool": lab.tool,
                            "target": lab.target, "waypoint_index": lab.waypoint_index})
         df[WAYPOINT_COLUMNS] = lab.waypoint
+        df["equivalent"] = lab.equivalent.astype(np.int64) @ (np.int64(1) << np.arange(n, dtype=np.int64))
         parts.append(df)
     return pd.concat(parts, ignore_index=True)
+
+
+def read_labels(path: Path, lengths: list[int], n_objects: int) -> list[EpisodeLabels]:
+    """Per-episode labels from ``hsp label``'s parquet, checked against the dataset's
+    episodes (their lengths) and its ``n_objects``."""
+    path = Path(path)
+    if not path.is_file():
+        raise HspError(f"{path}: labels file not found (run `hsp label`)")
+    df = pd.read_parquet(path)
+    missing = [c for c in LABEL_COLUMNS if c not in df.columns]
+    if missing:
+        raise HspError(f"{path}: not an hsp labels file of this version (missing columns {missing}; run `hsp label`)")
+    groups = dict(list(df.sort_values(["episode_index", "frame_index"]).groupby("episode_index")))
+    if sorted(groups) != list(range(len(lengths))):
+        raise HspError(f"{path}: labels for episodes {sorted(groups)[:5]}…, the dataset has {len(lengths)} episodes")
+    out = []
+    for e, H in enumerate(lengths):
+        g = groups[e]
+        if len(g) != H:
+            raise HspError(f"{path}: episode {e} has {len(g)} labelled frames, the dataset {H}")
+        bits = g["equivalent"].to_numpy()
+        if np.any(bits >> n_objects):
+            raise HspError(f"{path}: episode {e} names objects beyond the dataset's {n_objects}")
+        equivalent = (bits[:, None] >> np.arange(n_objects)) & 1 == 1
+        out.append(EpisodeLabels(g["tool"].to_numpy(), g["target"].to_numpy(), g["waypoint_index"].to_numpy(),
+                                 g[WAYPOINT_COLUMNS].to_numpy(), equivalent))
+    return out
 
 
 def canonical_waypoints(gt: GroundTruth, symmetries: list[str]) -> np.ndarray:
@@ -79,7 +109,10 @@ def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfi
                 raise HspError(f"{path}: {len(gt.tool)} frames, the dataset episode has {len(p)}")
             truth.append({"tool": gt.tool, "target": gt.target, "waypoint": canonical_waypoints(gt, symmetries)})
             true_index = np.argsort(match_identical(groups, p, gt.poses))  # the tracker's nut 1 may be the truth's nut 3
-            pred.append({"tool": true_index[lab.tool], "target": true_index[lab.target], "waypoint": lab.waypoint})
+            equivalent = np.zeros_like(lab.equivalent)
+            equivalent[:, true_index] = lab.equivalent
+            pred.append({"tool": true_index[lab.tool], "target": true_index[lab.target], "waypoint": lab.waypoint,
+                         "equivalent": equivalent})
         report.update(label_metrics(pred, truth))
     report["seconds"] = time.perf_counter() - start
     log.info("labelled %d episodes from %s into %s in %.1f s", len(labels), dataset_dir, out_file, report["seconds"])

@@ -61,6 +61,13 @@ class Steps:
     """p_t[o+_t, o*_t]: the tool in the target's frame ``(H, 7)``."""
     waypoint: np.ndarray
     """w_t ``(H, 7)``, in the target's frame."""
+    equivalent: np.ndarray
+    """The targets o*_t cannot be told apart from ``(H, n)`` bool, o*_t included
+    (:mod:`~hsp.labeling.equivalence`)."""
+    candidate_current: np.ndarray
+    """p_t[o+_t, j] for every object j ``(H, n, 7)``: the tool seen from each candidate target."""
+    candidate_waypoint: np.ndarray
+    """p_k[o+_t, j] ``(H, n, 7)``: the way-point as each candidate target would put it."""
     remaining: np.ndarray
     """The way from p_t[o+, o*] to w_t, translation and rotation vector in the target's frame ``(H, 6)``."""
     action: np.ndarray
@@ -148,7 +155,7 @@ def new_choices(tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray
 
 
 def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_index: np.ndarray, still_m: float,
-              settle_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              settle_frames: int) -> tuple[np.ndarray, np.ndarray]:
     """Labels ``(H,)`` each as a robot acts on them: a sub-task ends where its tool, having
     moved, comes to rest, and the next one is chosen once it has rested ``settle_frames``
     frames, as the :class:`~hsp.policy.stepper.Stepper` decides running (it also ends a
@@ -161,13 +168,14 @@ def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_in
     demonstrator did would wait for a switch that nothing in its observation announces (the
     next motion is what the switch causes). A frame is still when the tool's pose relative
     to the target moved less than ``still_m`` (:func:`way_length`) since the frame before.
-    ``rel`` is p_t[i, j] ``(H, n, n, 7)``. Returns tool, target, k and ``waiting`` (bool)."""
+    ``rel`` is p_t[i, j] ``(H, n, n, 7)``. Returns, per frame, the frame whose labels it
+    takes (``source``), and ``waiting`` (bool)."""
     H = len(tool)
     t = np.arange(H)
     moving = way_length(remaining_way(rel[np.maximum(t - 1, 0), tool, target], rel[t, tool, target])) >= still_m
-    tool, target, k = tool.copy(), target.copy(), waypoint_index.copy()
+    source = t.copy()
     waiting = np.zeros(H, bool)
-    starts = np.append(np.flatnonzero(new_choices(tool, target, k)), H)
+    starts = np.append(np.flatnonzero(new_choices(tool, target, waypoint_index)), H)
     for s0, s in zip(starts[:-2], starts[1:-1]):
         moved = np.flatnonzero(moving[s0 + 1:s])
         if not moved.size:
@@ -177,26 +185,35 @@ def decisions(rel: np.ndarray, tool: np.ndarray, target: np.ndarray, waypoint_in
         if last + 1 < s:
             waiting[last:s] = True  # their steps t → t + 1 are the rest
         if decide < s:
-            tool[decide:s], target[decide:s], k[decide:s] = tool[s], target[s], k[s]
-    return tool, target, k, waiting
+            source[decide:s] = s
+    return source, waiting
 
 
 def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, target: np.ndarray,
                   waypoint_index: np.ndarray, classes: np.ndarray, n_classes: int, still_m: float | None = None,
-                  settle_frames: int = 3) -> Steps:
+                  settle_frames: int = 3, equivalent: np.ndarray | None = None) -> Steps:
     """:class:`Steps` of one episode from canonical world poses ``(H, n, 7)``, whether each
     object is tracked ``(H, n)`` and its labels: tool, target and way-point frame k per frame
-    ``(H,)`` each (w_t = p_k[o+_t, o*_t]). With ``still_m``, the labels are first turned
-    into the robot's decisions (:func:`decisions`, with ``settle_frames``); the steps of the
-    frames spent resting do not count as actions."""
+    ``(H,)`` each (w_t = p_k[o+_t, o*_t]) and the target's equivalence set ``(H, n)`` (only
+    the target when not given). With ``still_m``, the labels are first turned into the
+    robot's decisions (:func:`decisions`, with ``settle_frames``); the steps of the frames
+    spent resting do not count as actions."""
     H, n = world.shape[:2]
     t = np.arange(H)
     rel = relative_poses(world)  # (H, n, n, 7): p_t[i, j]
+    if equivalent is None:
+        equivalent = np.arange(n) == target[:, None]
     waiting = np.zeros(H, bool)
     if still_m is not None:
-        tool, target, waypoint_index, waiting = decisions(rel, tool, target, waypoint_index, still_m, settle_frames)
+        source, waiting = decisions(rel, tool, target, waypoint_index, still_m, settle_frames)
+        tool, target, waypoint_index, equivalent = tool[source], target[source], waypoint_index[source], equivalent[source]
     current = rel[t, tool, target]
     waypoint = rel[waypoint_index, tool, target]
+    equivalent = (equivalent & tracked & tracked[waypoint_index]) | (np.arange(n) == target[:, None])
+    # p_t[o+, j] and p_k[o+, j] for every j of the set; the target's own elsewhere (a lost
+    # object's pose is no number to compute with)
+    candidate_current = np.where(equivalent[..., None], rel[t, tool], current[:, None])  # (H, n, 7)
+    candidate_waypoint = np.where(equivalent[..., None], rel[waypoint_index, tool], waypoint[:, None])
     flags = history_flags(tool, target, n)
     progress = np.zeros((H, 7))
     if H > 1:
@@ -213,7 +230,8 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         flags=flags, done=done_fractions(flags, classes, n_classes),
         history=memory_input(tool, target, waypoint, classes, n_classes), progress=progress.astype(f32),
         tracked=tracked.astype(bool), tool=tool.astype(np.int64), target=target.astype(np.int64),
-        current=current.astype(f32), waypoint=waypoint.astype(f32),
+        current=current.astype(f32), waypoint=waypoint.astype(f32), equivalent=equivalent.astype(bool),
+        candidate_current=candidate_current.astype(f32), candidate_waypoint=candidate_waypoint.astype(f32),
         remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
         labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
 

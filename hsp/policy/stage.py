@@ -9,7 +9,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from hsp.dataset.features import TrackStatus
 from hsp.dataset.reader import load_episodes
@@ -19,14 +18,13 @@ from hsp.geometry import relative
 from hsp.geometry.symmetry import z_folds
 from hsp.labeling.label import EpisodeLabels, canonical_poses, prepared_poses
 from hsp.labeling.priors import PriorConfig
-from hsp.labeling.stage import WAYPOINT_COLUMNS
+from hsp.labeling.stage import read_labels
 from hsp.policy.features import Steps, episode_steps
 from hsp.policy.scores import PolicyScores
 from hsp.policy.train import Policy, TrainConfig, save, split, train
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
-LABEL_COLUMNS = ["episode_index", "frame_index", "tool", "target", "waypoint_index", *WAYPOINT_COLUMNS]
 
 
 def semantic_classes(task: Task) -> tuple[np.ndarray, int]:
@@ -39,28 +37,6 @@ def semantic_classes(task: Task) -> tuple[np.ndarray, int]:
 def symmetry_folds(task: Task) -> np.ndarray:
     """Per object, its turns about z per revolution that leave it unchanged (0: any)."""
     return np.array([z_folds(o.symmetry) for o in task.objects])
-
-
-def read_labels(path: Path, lengths: list[int]) -> list[EpisodeLabels]:
-    """Per-episode labels from ``hsp label``'s parquet, checked against the dataset's episodes."""
-    path = Path(path)
-    if not path.is_file():
-        raise HspError(f"{path}: labels file not found (run `hsp label`)")
-    df = pd.read_parquet(path)
-    missing = [c for c in LABEL_COLUMNS if c not in df.columns]
-    if missing:
-        raise HspError(f"{path}: not an hsp labels file (missing columns {missing})")
-    groups = dict(list(df.sort_values(["episode_index", "frame_index"]).groupby("episode_index")))
-    if sorted(groups) != list(range(len(lengths))):
-        raise HspError(f"{path}: labels for episodes {sorted(groups)[:5]}…, the dataset has {len(lengths)} episodes")
-    out = []
-    for e, H in enumerate(lengths):
-        g = groups[e]
-        if len(g) != H:
-            raise HspError(f"{path}: episode {e} has {len(g)} labelled frames, the dataset {H}")
-        out.append(EpisodeLabels(g["tool"].to_numpy(), g["target"].to_numpy(), g["waypoint_index"].to_numpy(),
-                                 g[WAYPOINT_COLUMNS].to_numpy()))
-    return out
 
 
 def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray]) -> list[EpisodeLabels]:
@@ -89,7 +65,7 @@ def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray])
         tool, target = tracked[gt.tool], tracked[gt.target]
         canon = canonical_poses(p, [o.symmetry for o in task.objects])
         w = relative(canon[k, tool], canon[k, target])
-        out.append(EpisodeLabels(tool, target, k, w))
+        out.append(EpisodeLabels(tool, target, k, w, np.arange(p.shape[1]) == target[:, None]))
     return out
 
 
@@ -120,7 +96,7 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     poses, status, _ = load_episodes(dataset_dir, task.name, task.names)
     world = [canonical_poses(p, [o.symmetry for o in task.objects]) for p in poses]
     if labels_file is not None:
-        labels = read_labels(labels_file, [len(p) for p in poses])
+        labels = read_labels(labels_file, [len(p) for p in poses], len(task.objects))
     else:
         labels = annotation_labels(task, recordings_dir, poses)  # type: ignore[arg-type]
     source = labels_file or recordings_dir

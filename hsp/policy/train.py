@@ -2,7 +2,10 @@
 
 L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
 
-* L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool;
+* L_o+, L_o*: cross-entropy of the labelled tool, and of the labelled target given the tool
+  (of its equivalence set where the poses cannot tell the target from others,
+  :mod:`~hsp.labeling.equivalence`: L_o* + L_w is then the set's joint likelihood, so the
+  member whose frame explains the way-point best is learnt);
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
   error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from a
   random symmetric equivalent of the target (a cube turned by a quarter turn looks the
@@ -120,25 +123,27 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 def turned(b: dict[str, torch.Tensor], folds: np.ndarray, rng: np.random.Generator) -> dict[str, torch.Tensor]:
-    """π_m's input p_t[o+, o*] and label w_t of batch ``b`` seen from a symmetric equivalent
-    of each target (a turn about its z axis that leaves it unchanged, one draw per episode;
-    ``folds`` per object, :func:`~hsp.policy.features.symmetric_turns`), as
-    ``turned_current`` and ``turned_waypoint`` beside the rest of ``b``."""
-    B, T = b["tool"].shape
-    real = b["frame"].numpy()  # padding has no poses to turn
-    angle = symmetric_turns(folds[b["target"].numpy()], np.repeat(rng.random((B, 1)), T, 1))[real]
+    """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from a symmetric
+    equivalent of each candidate target j (a turn about its z axis that leaves it
+    unchanged, one draw per episode; ``folds`` per object,
+    :func:`~hsp.policy.features.symmetric_turns`), as ``turned_candidate_current`` and
+    ``turned_candidate_waypoint`` beside the rest of ``b``."""
+    B, T, n = b["candidate_current"].shape[:3]
+    real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
+    u = np.broadcast_to(rng.random((B, 1, 1)), (B, T, n))
+    angle = symmetric_turns(np.broadcast_to(folds, (B, T, n)), u)[real]
 
     def f(x: torch.Tensor) -> torch.Tensor:
         out = x.numpy().copy()
         out[real] = turned_about_z(out[real], angle)
         return torch.from_numpy(out)
 
-    return b | {"turned_current": f(b["current"]), "turned_waypoint": f(b["waypoint"])}
+    return b | {"turned_candidate_current": f(b["candidate_current"]),
+                "turned_candidate_waypoint": f(b["candidate_waypoint"])}
 
 
 def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Every output of the hierarchy on a batch with its labelled history (teacher forcing);
-    π_m reads ``turned_current`` where the batch has it (:func:`turned`)."""
+    """Every output of the hierarchy on a batch with its labelled history (teacher forcing)."""
     net, norm = policy.net, policy.norm
     codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
     B, T = b["world"].shape[:2]
@@ -152,8 +157,7 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     gather = lambda x, i: x.gather(2, i[..., None, None].expand(B, T, 1, x.shape[-1]))[:, :, 0]  # noqa: E731
     pair_flags = torch.cat([gather(b["flags"], tool), gather(b["flags"], target)], -1)
     current = norm("current", b["current"])
-    at = b.get("turned_current", b["current"])
-    mixture = net.pi_m(pair_classes, norm("current", at), pair_flags, norm("waypoint", at))
+    mixture = net.pi_m(pair_classes, current, pair_flags, norm("waypoint", b["current"]))
     action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
                                b["remaining"])
     return {"memory": memory, "objects": objects, "context": context, "log_tool": log_tool, "log_target": log_target,
@@ -161,15 +165,34 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
             "retrieved": net.retrieve(memory)}
 
 
+def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...]
+                        ) -> torch.Tensor:
+    """log π_m(p_k[o+, j] | o+, j, p_t[o+, j], flags) for every object j as the target, at
+    frames ``at`` (indices into the batch's frames): ``(D, n)``. Uses the batch's turned
+    poses where it has them (:func:`turned`)."""
+    net, norm = policy.net, policy.norm
+    codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
+    current = b.get("turned_candidate_current", b["candidate_current"])[at]  # (D, n, 7)
+    waypoint = b.get("turned_candidate_waypoint", b["candidate_waypoint"])[at]
+    tool, flags = b["tool"][at], b["flags"][at]  # (D,), (D, n, 3)
+    D, n = current.shape[:2]
+    pair_classes = torch.cat([codes[tool][:, None].expand(D, n, -1), codes.expand(D, n, -1)], -1)
+    tool_flags = flags.gather(1, tool[:, None, None].expand(D, 1, flags.shape[-1])).expand(D, n, -1)
+    mixture = net.pi_m(pair_classes, norm("current", current), torch.cat([tool_flags, flags], -1),
+                       norm("waypoint", current))
+    return mixture_log_prob(mixture, norm("waypoint", waypoint))
+
+
 def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """The six terms of L on one batch (means over the frames that count)."""
+    """The six terms of L on one batch (means over the frames that count). Where the
+    target is one of an equivalence set S (targets the poses cannot tell apart), L_o* is
+    −log Σ_{j∈S} π(j | o+) and L_o* + L_w is −log Σ_{j∈S} π(j | o+) π_m(p_k[o+, j] | j):
+    the member whose frame explains the way-point best takes the set's probability."""
     norm, C = policy.norm, policy.n_classes
     out = forward(policy, b)
     labelled = b["labelled"] & b["frame"]
     acted = b["acted"] & b["frame"]
     tool_nll = -out["log_tool"].gather(-1, b["tool"][..., None])[..., 0]
-    target_nll = -out["log_target"].gather(-1, b["target"][..., None])[..., 0]
-    w_nll = -mixture_log_prob(out["waypoint_mixture"], norm("waypoint", b.get("turned_waypoint", b["waypoint"])))
     scale = norm.stats["action.std"]
     a_nll = -gaussian_log_prob(out["action"] / scale, out["action_log_std"], b["action"] / scale)
     # L_mem: M(h_t) keeps still while the history gains nothing new, i.e. while (o+, o*, w)
@@ -187,7 +210,13 @@ def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
            - (torch.log_softmax(r[..., C:2 * C], -1) * previous[..., C:2 * C]).sum(-1)
            + ((r[..., 2 * C:] - norm("waypoint", previous[..., 2 * C:])) ** 2).mean(-1))
     decided = labelled & b["decision"]
-    return {"tool": _mean(tool_nll, decided), "target": _mean(target_nll, decided), "waypoint": _mean(w_nll, decided),
+    at = decided.nonzero(as_tuple=True)
+    members = b["equivalent"][at]  # (D, n)
+    log_target = out["log_target"][at]
+    set_mass = torch.logsumexp(log_target.masked_fill(~members, float("-inf")), -1)
+    joint = torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
+    D = max(len(members), 1)
+    return {"tool": _mean(tool_nll, decided), "target": -set_mass.sum() / D, "waypoint": -(joint - set_mass).sum() / D,
             "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
 
 
@@ -218,7 +247,8 @@ def free_run(policy: Policy, episodes: list[Steps]) -> dict[str, np.ndarray]:
 
 
 def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
-    """On ``episodes``: π_h's pair accuracy running free over the labelled frames, beside
+    """On ``episodes`` (a target counts as right when it is in the label's equivalence set,
+    the way-point then compared with the label's in its frame): π_h's pair accuracy running free over the labelled frames, beside
     repeating the previous label (``copy_previous``); at the labelled decision frames after
     the first, π_h's accuracy with the labelled history (teacher forcing), beside keeping the
     pair (``decision_copy_previous``); the median distance (mm) of π_m's way-point from the
@@ -233,13 +263,16 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
     tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
+    members = b["equivalent"].numpy()
+    member = lambda j: np.take_along_axis(members, j[..., None], -1)[..., 0]  # noqa: E731
     tf_tool = out["log_tool"].argmax(-1).numpy()
     tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
     tf_w = policy.norm.unscale("waypoint", out["waypoint"]).numpy()
     tf_w_err = np.linalg.norm(tf_w[..., :3] - w[..., :3], axis=-1)
     free = free_run(policy, episodes)
-    free_pair = (free["tool"] == tool) & (free["target"] == target)
-    free_w_err = np.linalg.norm(free["waypoint"][..., :3] - w[..., :3], axis=-1)
+    free_pair = (free["tool"] == tool) & member(free["target"])
+    free_label = np.take_along_axis(b["candidate_waypoint"].numpy(), free["target"][..., None, None], 2)[:, :, 0]
+    free_w_err = np.linalg.norm(free["waypoint"][..., :3] - free_label[..., :3], axis=-1)
     copy = np.zeros_like(labelled)
     copy[:, 1:] = (tool[:, 1:] == tool[:, :-1]) & (target[:, 1:] == target[:, :-1])
     first = np.zeros_like(labelled)
@@ -250,9 +283,9 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     return {
         "pair_accuracy_free": float(free_pair[labelled].mean()),
         "pair_accuracy_copy_previous": float(copy[labelled & ~first].mean()),
-        "decision_accuracy_teacher_forced": float(((tf_tool == tool) & (tf_target == target))[decided].mean()),
+        "decision_accuracy_teacher_forced": float(((tf_tool == tool) & member(tf_target))[decided].mean()),
         "decision_copy_previous": float(copy[decided].mean()),
-        "decision_subtask_accuracy": float(((tf_tool == tool) & (tf_target == target) & (tf_w_err <= WAYPOINT_HIT_M))[decided].mean()),
+        "decision_subtask_accuracy": float(((tf_tool == tool) & member(tf_target) & (tf_w_err <= WAYPOINT_HIT_M))[decided].mean()),
         "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
         "waypoint_error_mm_free": mm(free_w_err, labelled & free_pair),
         "waypoint_error_mm_teacher_forced": mm(tf_w_err, decided),

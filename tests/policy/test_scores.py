@@ -47,3 +47,42 @@ def test_em_over_a_policy_trained_on_the_labels_keeps_them():
     result = em_label([(world, status)], PriorConfig(),
                       lambda labels: lambda w, s, last: PolicyScores(w, s == 0, policy, last, PriorConfig()), 2)
     assert result.changed[-1] < 0.05
+
+
+def _beside(seed: int, H: int = 40):
+    """The end-effector rests at P, 1.5 cm from block 1 and 2.5 cm from block 2, then beside
+    block 1; the demonstrator's labels: block 2 (what it aimed at), then block 1, each
+    way-point where the rest ends. Nearness alone says block 1 throughout."""
+    rng = np.random.default_rng(seed)
+    world = np.zeros((H, 3, 7))
+    world[..., 6] = 1.0
+    P = np.array([rng.uniform(0.4, 0.6), rng.uniform(-0.2, 0.2), 0.02])
+    d = np.r_[np.cos(a := rng.uniform(0, 2 * np.pi)), np.sin(a), 0.0]
+    world[:, 1, :3], world[:, 2, :3] = P + 0.015 * d - [0, 0, 0.02], P - 0.025 * d - [0, 0, 0.02]
+    half = H // 2
+    for start, end, (p, q) in ((0, half, (P + [0, 0, 0.28], P)), (half, H, (P, P + 0.035 * d))):
+        n = (end - start) * 3 // 4
+        world[start:start + n, 0, :3] = np.linspace(p, q, n)
+        world[start + n:end, 0, :3] = q
+    first = np.arange(H) < half
+    return world, np.zeros((H, 3), np.int64), np.where(first, 2, 1), np.where(first, half - 1, H - 1)
+
+
+def test_em_over_networks_that_encode_a_known_labelling_recovers_it():
+    """Networks trained on the demonstrator's labels of four episodes; on a fifth, EM's
+    E-steps (the networks fixed, their history from the round before) start from the
+    priors' labels, which name the wrong block, and settle on the known labelling as the
+    robot would act on it (each switch where the rest begins)."""
+    classes = np.array([0, 1, 2])
+    episodes = [_beside(seed) for seed in range(5)]
+    steps = [episode_steps(w, s == 0, np.zeros(len(w), np.int64), target, k, classes, 3, 0.002, 3)
+             for w, s, target, k in episodes]
+    policy, _ = train(steps[1:], ["ee", "a", "b"], classes, 3, TrainConfig(iterations=150, batch_steps=80,
+                                                                             learning_rate=3e-3), seed=0)
+    world, status, target, _ = episodes[0]
+    prior = label_episode(world, status, PriorConfig())
+    assert np.all(prior.target == 1), "nearness alone names block 1 throughout"
+    result = em_label([(world, status)], PriorConfig(),
+                      lambda labels: lambda w, s, last: PolicyScores(w, s == 0, policy, last, PriorConfig()), 4)
+    assert result.changed[-1] == 0.0
+    np.testing.assert_array_equal(result.labels[0].target, steps[0].target)

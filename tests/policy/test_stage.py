@@ -1,38 +1,6 @@
-"""Reading the label stage's parquet for training: checked against the dataset's episodes."""
+"""The train stage's view of a task."""
 
-import numpy as np
-import pytest
-
-from hsp.errors import HspError
-from hsp.labeling.label import label_episode
-from hsp.labeling.priors import PriorConfig
-from hsp.labeling.stage import labels_frame
-from hsp.policy.stage import read_labels, semantic_classes
-from tests.labeling.test_em import _episode
-
-
-@pytest.fixture
-def labels_file(tmp_path):
-    world, status = _episode(H=30)
-    labels = [label_episode(world, status, PriorConfig())] * 2
-    path = tmp_path / "labels.parquet"
-    labels_frame(labels).to_parquet(path)
-    return path, labels
-
-
-def test_labels_read_back_as_written(labels_file):
-    path, labels = labels_file
-    back = read_labels(path, [30, 30])
-    for a, b in zip(back, labels):
-        np.testing.assert_array_equal(a.target, b.target)
-        np.testing.assert_array_equal(a.waypoint_index, b.waypoint_index)
-        np.testing.assert_allclose(a.waypoint, b.waypoint)
-
-
-@pytest.mark.parametrize("lengths, match", [([30], "the dataset has 1 episodes"), ([30, 31], "episode 1 has 30 labelled frames")])
-def test_labels_of_another_dataset_are_a_clear_error(labels_file, lengths, match):
-    with pytest.raises(HspError, match=match):
-        read_labels(labels_file[0], lengths)
+from hsp.policy.stage import semantic_classes
 
 
 def test_identical_objects_share_a_semantic_class(tasks):

@@ -10,6 +10,8 @@ from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper
 from hsp.policy.train import FORMAT, Policy, TrainConfig, batch, forward, load, losses, save, split, train, validate
 from hsp.policy.features import episode_steps
+from hsp.labeling.label import label_episode
+from hsp.labeling.priors import PriorConfig
 from tests.labeling.test_em import _episode
 from tests.policy.test_features import CLASSES, _steps
 
@@ -64,6 +66,30 @@ def test_each_loss_term_has_its_hand_computed_value():
     assert got["memory"] == pytest.approx(drift[repeat[1:]].mean(), rel=1e-4)
     w_prev = std("waypoint", s.history[1:, 4:])
     assert got["retrieval"] == pytest.approx(2 * np.log(2) + np.mean(w_prev**2), rel=1e-4)
+
+
+def test_a_target_set_is_learnt_through_the_way_point_each_member_explains():
+    """Where the labelled target cannot be told from another (both blocks stay still while
+    the hand moves), L_o* is −log Σ_S π(j | o+) and L_w the rest of the set's joint
+    likelihood, −log Σ_S π(j | o+) π_m(p_k[o+, j] | j) / Σ_S π(j | o+)."""
+    world, status = _episode()
+    lab = label_episode(world, status, PriorConfig())
+    s = episode_steps(world, status == 0, lab.tool, lab.target, lab.waypoint_index, CLASSES, 2, equivalent=lab.equivalent)
+    policy = _blank_policy([s, s])
+    with torch.no_grad():
+        got = {k: float(v) for k, v in losses(policy, batch([s, s], [0])).items()}
+    std = lambda x: (x - policy.norm.stats["waypoint.mean"].numpy()) / policy.norm.stats["waypoint.std"].numpy()  # noqa: E731
+    density = lambda d: np.exp(-0.5 * (d**2).sum(-1) - 7 * LOG_SQRT_2PI)  # noqa: E731
+    d = s.decision & s.labelled
+    members = s.equivalent[d]
+    assert members.sum(1).max() == 2
+    allowed = (np.arange(3) != 0) & (np.arange(3) != s.tool[d][:, None])
+    pi = allowed / allowed.sum(1, keepdims=True)  # π_h uniform over the allowed targets
+    w, at = std(s.candidate_waypoint[d]), std(s.candidate_current[d])
+    m = 0.5 * density(w) + 0.5 * density(w - at)  # (D, n)
+    mass = (pi * members).sum(1)
+    assert got["target"] == pytest.approx(np.mean(-np.log(mass)), abs=1e-5)
+    assert got["waypoint"] == pytest.approx(np.mean(-np.log((pi * m * members).sum(1) / mass)), rel=1e-4)
 
 
 def test_a_model_overfits_one_short_episode():
