@@ -13,6 +13,7 @@ from hsp.geometry import relative
 from hsp.geometry.symmetry import canonical_orientations
 from hsp.labeling.equivalence import equivalent_targets
 from hsp.labeling.priors import PriorConfig, PriorScores, continuous_quaternions, pairs_of
+from hsp.labeling.ties import resolve_target_ties
 from hsp.labeling.viterbi import Scores, Transition, viterbi
 
 
@@ -71,8 +72,10 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
     used as given.
 
     ``scores`` replaces the priors (EM with trained networks); it must use the pair order
-    of :func:`~hsp.labeling.priors.pairs_of`. The targets rigid with the labelled one over
-    its sub-task come with it as its equivalence set (:mod:`~hsp.labeling.equivalence`).
+    of :func:`~hsp.labeling.priors.pairs_of`. Over the priors, the tie rules of
+    :mod:`~hsp.labeling.ties` then choose among targets rigid with each other; over
+    ``scores`` nothing overrules Viterbi. The targets rigid with the labelled one over its
+    sub-task come with it as its equivalence set (:mod:`~hsp.labeling.equivalence`).
     """
     H, n = world.shape[:2]
     if H < 2:
@@ -84,5 +87,7 @@ def label_episode(world: np.ndarray, status: np.ndarray, cfg: PriorConfig, score
         world = prepared_poses(world, symmetries, cfg)
     path = viterbi(scores or PriorScores(world, ok, cfg), Transition(cfg.gamma, cfg.beta))
     tool, target = pairs_of(n)[path.pair].T
+    if scores is None:
+        target = resolve_target_ties(world, ok, tool, target, path.k, cfg.rigid_m, cfg.rigid_deg)
     return EpisodeLabels(tool, target, path.k, relative(world[path.k, tool], world[path.k, target]),
                          equivalent_targets(world, ok, tool, target, cfg.rigid_m, cfg.rigid_deg))
