@@ -154,6 +154,22 @@ def test_the_checkpoint_kept_is_the_best_on_held_out_episodes():
         validate(policy, data[:1])["decision_subtask_accuracy"])
 
 
+def test_among_equally_right_checkpoints_the_more_precise_one_is_kept(monkeypatch):
+    """Held-out decision accuracy first, then the smaller way-point error."""
+    import hsp.policy.train as train_module
+
+    scripted = iter([(0.9, 1.0), (1.0, 5.0), (1.0, 2.0), (1.0, 3.0)])
+
+    def fake_validate(policy, episodes):
+        right, mm = next(scripted)
+        return {"decision_subtask_accuracy": right, "waypoint_error_mm_teacher_forced": mm, "pair_accuracy_free": 0.0}
+
+    monkeypatch.setattr(train_module, "validate", fake_validate)
+    _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20),
+                      seed=0, held_out=_data()[:1])
+    assert report["checkpoint_iteration"] == 60 and report["validation_waypoint_error_mm_teacher_forced"] == 2.0
+
+
 def test_save_and_load_give_the_same_policy(tmp_path):
     policy, _ = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=3, batch_steps=40), seed=0)
     save(policy, TrainConfig(iterations=1), tmp_path / "m")
