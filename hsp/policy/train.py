@@ -147,7 +147,6 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     """Every output of the hierarchy on a batch with its labelled history (teacher forcing)."""
     net, norm = policy.net, policy.norm
     codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
-    B, T = b["world"].shape[:2]
     memory, _ = net.remember(norm.history(b["history"]))
     objects, context = net.read(norm, codes, b["world"], b["ee_in_object"], b["flags"], b["tracked"], b["progress"],
                                 b["done"], memory)
@@ -155,33 +154,36 @@ def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tenso
     log_tool = net.pi_tool(objects, context)
     log_target = net.pi_target(objects, norm("tool_in_object", b["tool_in_object"]), codes[tool], context, tool)
     pair_classes = torch.cat([codes[tool], codes[target]], -1)
-    gather = lambda x, i: x.gather(2, i[..., None, None].expand(B, T, 1, x.shape[-1]))[:, :, 0]  # noqa: E731
-    pair_flags = torch.cat([gather(b["flags"], tool), gather(b["flags"], target)], -1)
     current = norm("current", b["current"])
-    mixture = net.pi_m(pair_classes, current, pair_flags, norm("waypoint", b["current"]))
     action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
                                b["remaining"])
     return {"memory": memory, "objects": objects, "context": context, "log_tool": log_tool, "log_target": log_target,
-            "waypoint_mixture": mixture, "waypoint": mixture_mode(mixture), "action": action, "action_log_std": log_std,
-            "retrieved": net.retrieve(memory)}
+            "action": action, "action_log_std": log_std, "retrieved": net.retrieve(memory)}
+
+
+def candidate_mixtures(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...]
+                       ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """π_m's mixture over w_t (standardised) for every object j as the target, from
+    p_t[o+, j] and the pair's flags, at frames ``at`` (indices into the batch's frames):
+    log-weights ``(D, n, 2K)``, means and log-σ ``(D, n, 2K, 7)``. Uses the batch's turned
+    poses where it has them (:func:`turned`). π_m is asked at decisions only, so it is
+    computed there, not in :func:`forward`."""
+    net, norm = policy.net, policy.norm
+    codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
+    current = b.get("turned_candidate_current", b["candidate_current"])[at]  # (D, n, 7)
+    tool, flags = b["tool"][at], b["flags"][at]  # (D,), (D, n, 3)
+    D, n = current.shape[:2]
+    pair_classes = torch.cat([codes[tool][:, None].expand(D, n, -1), codes.expand(D, n, -1)], -1)
+    tool_flags = flags.gather(1, tool[:, None, None].expand(D, 1, flags.shape[-1])).expand(D, n, -1)
+    return net.pi_m(pair_classes, norm("current", current), torch.cat([tool_flags, flags], -1), norm("waypoint", current))
 
 
 def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...]
                         ) -> torch.Tensor:
     """log π_m(p_k[o+, j] | o+, j, p_t[o+, j], flags) for every object j as the target, at
-    frames ``at`` (indices into the batch's frames): ``(D, n)``. Uses the batch's turned
-    poses where it has them (:func:`turned`)."""
-    net, norm = policy.net, policy.norm
-    codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
-    current = b.get("turned_candidate_current", b["candidate_current"])[at]  # (D, n, 7)
+    frames ``at``: ``(D, n)`` (:func:`candidate_mixtures`)."""
     waypoint = b.get("turned_candidate_waypoint", b["candidate_waypoint"])[at]
-    tool, flags = b["tool"][at], b["flags"][at]  # (D,), (D, n, 3)
-    D, n = current.shape[:2]
-    pair_classes = torch.cat([codes[tool][:, None].expand(D, n, -1), codes.expand(D, n, -1)], -1)
-    tool_flags = flags.gather(1, tool[:, None, None].expand(D, 1, flags.shape[-1])).expand(D, n, -1)
-    mixture = net.pi_m(pair_classes, norm("current", current), torch.cat([tool_flags, flags], -1),
-                       norm("waypoint", current))
-    return mixture_log_prob(mixture, norm("waypoint", waypoint))
+    return mixture_log_prob(candidate_mixtures(policy, b, at), policy.norm("waypoint", waypoint))
 
 
 def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -259,8 +261,13 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     checkpoints are chosen on: what the robot is asked); and the median distance (mm) of
     π_l's mean step from the observed one."""
     b = batch(episodes, list(range(len(episodes))))
+    first = np.zeros(b["frame"].shape, bool)
+    first[:, 0] = True
+    decided = (b["labelled"] & b["frame"] & b["decision"]).numpy() & ~first
+    at = torch.from_numpy(decided).nonzero(as_tuple=True)
     with torch.no_grad():
         out = forward(policy, b)
+        modes = mixture_mode(candidate_mixtures(policy, b, at))  # (D, n, 7)
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
     tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
@@ -268,29 +275,26 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     member = lambda j: np.take_along_axis(members, j[..., None], -1)[..., 0]  # noqa: E731
     tf_tool = out["log_tool"].argmax(-1).numpy()
     tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
-    tf_w = policy.norm.unscale("waypoint", out["waypoint"]).numpy()
-    tf_w_err = np.linalg.norm(tf_w[..., :3] - w[..., :3], axis=-1)
+    tf_w = policy.norm.unscale("waypoint", modes[torch.arange(len(modes)), b["target"][at]]).numpy()  # the labelled target's
+    tf_w_err = np.linalg.norm(tf_w[:, :3] - w[decided][:, :3], axis=-1)  # at the decisions, in their order
     free = free_run(policy, episodes)
     free_pair = (free["tool"] == tool) & member(free["target"])
     free_label = np.take_along_axis(b["candidate_waypoint"].numpy(), free["target"][..., None, None], 2)[:, :, 0]
     free_w_err = np.linalg.norm(free["waypoint"][..., :3] - free_label[..., :3], axis=-1)
     copy = np.zeros_like(labelled)
     copy[:, 1:] = (tool[:, 1:] == tool[:, :-1]) & (target[:, 1:] == target[:, :-1])
-    first = np.zeros_like(labelled)
-    first[:, 0] = True
-    decided = labelled & b["decision"].numpy() & ~first
     a_err = np.linalg.norm((out["action"].numpy() - b["action"].numpy())[..., :3], axis=-1)
-    mm = lambda x, m: float(1000 * np.median(x[m])) if m.any() else float("nan")  # noqa: E731
+    mm = lambda x: float(1000 * np.median(x)) if x.size else float("nan")  # noqa: E731
     return {
         "pair_accuracy_free": float(free_pair[labelled].mean()),
         "pair_accuracy_copy_previous": float(copy[labelled & ~first].mean()),
         "decision_accuracy_teacher_forced": float(((tf_tool == tool) & member(tf_target))[decided].mean()),
         "decision_copy_previous": float(copy[decided].mean()),
-        "decision_subtask_accuracy": float(((tf_tool == tool) & member(tf_target) & (tf_w_err <= WAYPOINT_HIT_M))[decided].mean()),
+        "decision_subtask_accuracy": float((((tf_tool == tool) & member(tf_target))[decided] & (tf_w_err <= WAYPOINT_HIT_M)).mean()),
         "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
-        "waypoint_error_mm_free": mm(free_w_err, labelled & free_pair),
-        "waypoint_error_mm_teacher_forced": mm(tf_w_err, decided),
-        "action_error_mm": mm(a_err, acted),
+        "waypoint_error_mm_free": mm(free_w_err[labelled & free_pair]),
+        "waypoint_error_mm_teacher_forced": mm(tf_w_err),
+        "action_error_mm": mm(a_err[acted]),
     }
 
 

@@ -4,19 +4,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hsp.labeling.ties import held_positions, resolve_target_ties
-
-IDENTITY = [0, 0, 0, 1.0]
-
-
-def _scene(H: int = 20) -> np.ndarray:
-    """0 end-effector, 1 tool (moving along x), 2 a base block, 3 a block on it, 4 a far block."""
-    world = np.tile(np.r_[0.0, 0.0, 0.0, IDENTITY], (H, 5, 1))
-    world[:, 0, :3] = [0.0, 0.0, 0.5]
-    world[:, 1, 0] = np.linspace(-0.2, 0.05, H)
-    world[:, 1, 2] = 0.0
-    world[:, 3, 2] = 0.04
-    world[:, 4, :3] = [0.5, 0.5, 0.0]
-    return world
+from tests.labeling.test_equivalence import IDENTITY, _scene
 
 
 def test_the_rigid_candidate_nearest_at_a_way_point_becomes_the_target():
