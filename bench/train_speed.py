@@ -40,6 +40,7 @@ def main() -> None:
         steps.append(episode_steps(world, np.ones((args.frames, n), bool), lab.tool, lab.target, lab.waypoint_index,
                                    classes, n, equivalent=lab.equivalent))
     cfg = TrainConfig(iterations=args.iterations, checkpoint_every=args.iterations)
+    train(steps, [str(i) for i in range(n)], classes, n, TrainConfig(iterations=2), seed=0)  # warm-up: torch's lazy imports
     times = []
     for _ in range(args.repeats):
         start = time.perf_counter()

@@ -112,8 +112,12 @@ def batch(episodes: list[Steps], idx: list[int]) -> dict[str, torch.Tensor]:
     T = max(len(episodes[i]) for i in idx)
     out: dict[str, torch.Tensor] = {}
     for name in STEP_FIELDS:
-        arrays = [getattr(episodes[i], name) for i in idx]
-        out[name] = torch.from_numpy(np.stack([np.pad(a, [(0, T - len(a))] + [(0, 0)] * (a.ndim - 1)) for a in arrays]))
+        like = getattr(episodes[idx[0]], name)
+        padded = np.zeros((len(idx), T, *like.shape[1:]), like.dtype)
+        for row, i in enumerate(idx):
+            a = getattr(episodes[i], name)
+            padded[row, :len(a)] = a
+        out[name] = torch.from_numpy(padded)
     out["frame"] = torch.arange(T)[None] < torch.tensor([len(episodes[i]) for i in idx])[:, None]
     return out
 
@@ -143,16 +147,22 @@ def turned(b: dict[str, torch.Tensor], folds: np.ndarray, rng: np.random.Generat
                 "turned_candidate_waypoint": f(b["candidate_waypoint"])}
 
 
-def forward(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """Every output of the hierarchy on a batch with its labelled history (teacher forcing)."""
+def forward(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...] | None = None
+            ) -> dict[str, torch.Tensor]:
+    """Every output of the hierarchy on a batch with its labelled history (teacher forcing):
+    M(h_t), π_l and the retrieval at every frame ``(B, T, …)``; π_h's inputs and heads at
+    frames ``at`` only ``(D, …)`` (every frame when None): π_h is trained and asked where a
+    sub-task ends, a few frames in a hundred, and its heads cost most of a step."""
     net, norm = policy.net, policy.norm
     codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
     memory, _ = net.remember(norm.history(b["history"]))
-    objects, context = net.read(norm, codes, b["world"], b["ee_in_object"], b["flags"], b["tracked"], b["progress"],
-                                b["done"], memory)
-    tool, target = b["tool"], b["target"]
+    pick = (lambda x: x) if at is None else (lambda x: x[at])  # noqa: E731
+    objects, context = net.read(norm, codes, *map(pick, (b["world"], b["ee_in_object"], b["flags"], b["tracked"],
+                                                          b["progress"], b["done"], memory)))
+    tool = pick(b["tool"])
     log_tool = net.pi_tool(objects, context)
-    log_target = net.pi_target(objects, norm("tool_in_object", b["tool_in_object"]), codes[tool], context, tool)
+    log_target = net.pi_target(objects, norm("tool_in_object", pick(b["tool_in_object"])), codes[tool], context, tool)
+    tool, target = b["tool"], b["target"]
     pair_classes = torch.cat([codes[tool], codes[target]], -1)
     current = norm("current", b["current"])
     action, log_std = net.pi_l(pair_classes, current, norm("waypoint", b["waypoint"]), norm("remaining", b["remaining"]),
@@ -192,10 +202,12 @@ def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
     −log Σ_{j∈S} π(j | o+) and L_o* + L_w is −log Σ_{j∈S} π(j | o+) π_m(p_k[o+, j] | j):
     the member whose frame explains the way-point best takes the set's probability."""
     norm, C = policy.norm, policy.n_classes
-    out = forward(policy, b)
     labelled = b["labelled"] & b["frame"]
+    decided = labelled & b["decision"]
+    at = decided.nonzero(as_tuple=True)
+    out = forward(policy, b, at)
     acted = b["acted"] & b["frame"]
-    tool_nll = -out["log_tool"].gather(-1, b["tool"][..., None])[..., 0]
+    tool_nll = -out["log_tool"].gather(-1, b["tool"][at][:, None])[:, 0]
     scale = norm.stats["action.std"]
     a_nll = -gaussian_log_prob(out["action"] / scale, out["action_log_std"], b["action"] / scale)
     # L_mem: M(h_t) keeps still while the history gains nothing new, i.e. while (o+, o*, w)
@@ -212,14 +224,12 @@ def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
     ret = (-(torch.log_softmax(r[..., :C], -1) * previous[..., :C]).sum(-1)
            - (torch.log_softmax(r[..., C:2 * C], -1) * previous[..., C:2 * C]).sum(-1)
            + ((r[..., 2 * C:] - norm("waypoint", previous[..., 2 * C:])) ** 2).mean(-1))
-    decided = labelled & b["decision"]
-    at = decided.nonzero(as_tuple=True)
     members = b["equivalent"][at]  # (D, n)
-    log_target = out["log_target"][at]
+    log_target = out["log_target"]
     set_mass = torch.logsumexp(log_target.masked_fill(~members, float("-inf")), -1)
     joint = torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
     D = max(len(members), 1)
-    return {"tool": _mean(tool_nll, decided), "target": -set_mass.sum() / D, "waypoint": -(joint - set_mass).sum() / D,
+    return {"tool": tool_nll.sum() / D, "target": -set_mass.sum() / D, "waypoint": -(joint - set_mass).sum() / D,
             "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
 
 
@@ -266,17 +276,18 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     decided = (b["labelled"] & b["frame"] & b["decision"]).numpy() & ~first
     at = torch.from_numpy(decided).nonzero(as_tuple=True)
     with torch.no_grad():
-        out = forward(policy, b)
+        out = forward(policy, b, at)
         modes = mixture_mode(candidate_mixtures(policy, b, at))  # (D, n, 7)
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
     tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
     members = b["equivalent"].numpy()
     member = lambda j: np.take_along_axis(members, j[..., None], -1)[..., 0]  # noqa: E731
-    tf_tool = out["log_tool"].argmax(-1).numpy()
+    tf_tool = out["log_tool"].argmax(-1).numpy()  # at the decisions
     tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
     tf_w = policy.norm.unscale("waypoint", modes[torch.arange(len(modes)), b["target"][at]]).numpy()  # the labelled target's
     tf_w_err = np.linalg.norm(tf_w[:, :3] - w[decided][:, :3], axis=-1)  # at the decisions, in their order
+    tf_right = (tf_tool == tool[decided]) & np.take_along_axis(members[decided], tf_target[:, None], -1)[:, 0]
     free = free_run(policy, episodes)
     free_pair = (free["tool"] == tool) & member(free["target"])
     free_label = np.take_along_axis(b["candidate_waypoint"].numpy(), free["target"][..., None, None], 2)[:, :, 0]
@@ -288,9 +299,9 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     return {
         "pair_accuracy_free": float(free_pair[labelled].mean()),
         "pair_accuracy_copy_previous": float(copy[labelled & ~first].mean()),
-        "decision_accuracy_teacher_forced": float(((tf_tool == tool) & member(tf_target))[decided].mean()),
+        "decision_accuracy_teacher_forced": float(tf_right.mean()),
         "decision_copy_previous": float(copy[decided].mean()),
-        "decision_subtask_accuracy": float((((tf_tool == tool) & member(tf_target))[decided] & (tf_w_err <= WAYPOINT_HIT_M)).mean()),
+        "decision_subtask_accuracy": float((tf_right & (tf_w_err <= WAYPOINT_HIT_M)).mean()),
         "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
         "waypoint_error_mm_free": mm(free_w_err[labelled & free_pair]),
         "waypoint_error_mm_teacher_forced": mm(tf_w_err),
