@@ -3,7 +3,8 @@
 A :class:`Stepper` holds, for a batch of episodes, the LSTM state and the tools, targets
 and way-points it chose itself, and builds from them the same history features that
 training builds from labels (:mod:`~hsp.policy.features`). Free-running validation steps
-it over held-out recordings; the closed-loop runner steps it on the robot's observations.
+it over held-out recordings, asked where the recording's sub-tasks end; the closed-loop
+runner steps it on the robot's observations, where it decides that itself.
 Given ``forced`` choices (the labels), it reproduces the teacher-forced batch computation
 of training exactly (tested), so what is trained is what runs.
 
@@ -16,10 +17,10 @@ grasped). Only then, and at the first frame, are π_h and π_m asked for the nex
 target and way-point; they are trained on exactly those frames (the labels' decisions,
 :func:`~hsp.policy.features.decisions`, end a sub-task where the demonstrator's tool came
 to rest at its way-point). A slow step far from w_t is neither, so a low level that
-crawls does not end its sub-task early. Over a recording (free-running validation), a
-demonstrator who rests long after a decision is taken as stopped short again every
-``settle_frames`` frames. Between decisions the LSTM still reads the history every
-frame, as in training.
+crawls does not end its sub-task early. Over a recording the rule does not apply: the
+policy does not move the tool, and a demonstrator who rests long after a decision would
+be taken as stopped short again every ``settle_frames`` frames. Between decisions the
+LSTM still reads the history every frame, as in training.
 """
 
 from __future__ import annotations
@@ -119,10 +120,13 @@ class Stepper:
         return decide
 
     def step(self, world: np.ndarray, tracked: np.ndarray | None = None,
-             forced: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Choice:
+             forced: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             ended: np.ndarray | None = None) -> Choice:
         """One frame: canonical world poses ``(B, n, 7)`` and whether each object is tracked
         ``(B, n)`` → the choice. ``forced`` (tool ``(B,)``, target ``(B,)``, w ``(B, 7)``)
-        replaces the choice in the history (teacher forcing) and in the inputs of π_m and π_l."""
+        replaces the choice in the history (teacher forcing) and in the inputs of π_m and π_l.
+        ``ended`` ``(B,)`` says where the sub-task is over in place of the stepper's own rule
+        (over a recording, the demonstrator ends its sub-tasks, not the policy)."""
         B, n = world.shape[:2]
         if (B, n) != (self.B, self.n):
             raise ValueError(f"step: poses of {B} episodes × {n} objects, the stepper runs {self.B} × {self.n}")
@@ -137,7 +141,7 @@ class Stepper:
             memory, self.state = net.remember(norm.history(f(x))[:, None], self.state)
             objects, context = net.read(norm, f(self.class_codes), f(world.astype(np.float32)), f(ee_in), f(flags),
                                         f(tracked), f(g), f(done), memory[:, 0])
-            decide = self._decide(world)
+            decide = self._decide(world) if ended is None or self.prev is None else np.asarray(ended, bool)
             log_tool = net.pi_tool(objects, context)
             tool = np.where(decide, log_tool.argmax(-1).numpy(), self._kept(0)) if forced is None else forced[0]
             tool_in = relative(world[rows, tool][:, None].repeat(n, 1), world).astype(np.float32)

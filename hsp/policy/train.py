@@ -244,17 +244,21 @@ def split(n_episodes: int, every: int) -> tuple[list[int], list[int]]:
 
 def free_run(policy: Policy, episodes: list[Steps]) -> dict[str, np.ndarray]:
     """The hierarchy stepped over recorded episodes on its own history (never the labels):
-    per frame, its tool, target and way-point, padded to the longest episode ``(E, T)``."""
+    per frame, its tool, target and way-point, padded to the longest episode ``(E, T)``.
+    It chooses where the recording's sub-tasks end (``Steps.decision``): the demonstrator
+    moves the tool there, not the policy, so the stepper's own rule (the tool at rest at
+    the policy's way-point) would read every pause of the demonstrator as a new decision."""
     T = max(len(e) for e in episodes)
     pad = lambda x: np.concatenate([x, np.repeat(x[-1:], T - len(x), 0)])  # noqa: E731
     world = np.stack([pad(e.world.astype(np.float64)) for e in episodes])
     tracked = np.stack([pad(e.tracked) for e in episodes])
+    ended = np.stack([np.pad(e.decision, (0, T - len(e))) for e in episodes])
     stepper = Stepper(policy, len(episodes))
     tool = np.zeros((len(episodes), T), np.int64)
     target = np.zeros_like(tool)
     waypoint = np.zeros((len(episodes), T, 7), np.float32)
     for t in range(T):
-        c = stepper.step(world[:, t], tracked[:, t])
+        c = stepper.step(world[:, t], tracked[:, t], ended=ended[:, t])
         tool[:, t], target[:, t], waypoint[:, t] = c.tool, c.target, c.waypoint
     return {"tool": tool, "target": target, "waypoint": waypoint}
 

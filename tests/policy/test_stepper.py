@@ -45,3 +45,18 @@ def test_stepped_over_its_labels_the_stepper_ends_each_sub_task_where_the_labels
     decided = [stepper.step(world[t:t + 1], forced=(s.tool[t:t + 1], s.target[t:t + 1], s.waypoint[t:t + 1])).decided[0]
                for t in range(H - 1)]  # the last frame: the recording ends, not the sub-task
     np.testing.assert_array_equal(np.flatnonzero(decided), np.flatnonzero(s.decision[:-1]))
+
+
+def test_over_a_recording_it_chooses_where_the_sub_tasks_end_however_long_the_demonstrator_rests():
+    """The demonstrator rests 20 frames at object 1: the rule running would take the rest as
+    stopping short every ``settle_frames``; told where the recording's sub-tasks end
+    (free-running validation), the stepper chooses there and nowhere else, from its own history."""
+    world, target, k = reach_rest_reach(rest=20)
+    H = len(world)
+    s = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2)
+    policy, _ = train([s], ["ee", "a", "b"], CLASSES, 2, TrainConfig(iterations=3, batch_steps=40), seed=0)
+    own, told = Stepper(policy, 1), Stepper(policy, 1)
+    by_rule = [own.step(world[t:t + 1]).decided[0] for t in range(H)]
+    assert np.count_nonzero(by_rule) > np.count_nonzero(s.decision)  # re-decides during the rest
+    by_recording = [told.step(world[t:t + 1], ended=s.decision[t:t + 1]).decided[0] for t in range(H)]
+    np.testing.assert_array_equal(np.flatnonzero(by_recording), np.flatnonzero(s.decision))
