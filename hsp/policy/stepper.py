@@ -30,9 +30,32 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hsp.policy.features import FLAGS, one_hot, remaining_way, way_length
+from hsp.policy.features import FLAGS, one_hot, remaining_way, sector_turns, turned_about_z, views, way_length
 from hsp.geometry import normalize_quat, relative
 from hsp.policy.networks import mixture_mode
+
+
+def pi_m_waypoint(policy, classes: torch.Tensor, current: np.ndarray, flags: torch.Tensor, folds: np.ndarray
+                  ) -> np.ndarray:
+    """π_m's way-point w_t (the heaviest component's mean, physical units, unit quaternion)
+    ``(..., 7)`` for pairs of labels ``classes``, p_t[o+, o*] ``current`` ``(..., 7)`` and
+    flags, on targets whose symmetry has ``folds`` ``(...)``. π_m learns every decision
+    seen from the turn of its target that puts the way-point in the canonical sector
+    (:func:`~hsp.policy.features.sector_turns`), so it is asked from every turn of the
+    target and keeps the answer that lands nearest that sector, turned back."""
+    norm, net = policy.norm, policy.net
+    angle, valid = views(folds)  # (..., S)
+    S = angle.shape[-1]
+    seen = turned_about_z(np.repeat(np.asarray(current, np.float64)[..., None, :], S, -2), angle)  # (..., S, 7)
+    x = torch.from_numpy(seen.astype(np.float32))
+    expand = lambda t: t.unsqueeze(-2).expand(*t.shape[:-1], S, t.shape[-1])  # noqa: E731
+    w = norm.unscale("waypoint", mixture_mode(net.pi_m(expand(classes), norm("current", x), expand(flags),
+                                                       norm("waypoint", x)))).numpy().astype(np.float64)
+    off = np.where(valid, np.abs(sector_turns(w, folds[..., None])), np.inf)
+    pick = off.argmin(-1)[..., None]
+    chosen = np.take_along_axis(w, pick[..., None], -2)[..., 0, :]
+    w = turned_about_z(chosen, -np.take_along_axis(angle, pick, -1)[..., 0])
+    return np.concatenate([w[..., :3], normalize_quat(w[..., 3:])], -1).astype(np.float32)
 
 
 @dataclass
@@ -61,7 +84,8 @@ class Stepper:
     ``policy.settle_frames``) over ``batch`` episodes."""
 
     def __init__(self, policy, batch: int = 1) -> None:
-        self.net, self.norm = policy.net, policy.norm
+        self.policy, self.net, self.norm = policy, policy.net, policy.norm
+        self.folds = np.ones(len(policy.classes), np.int64) if policy.folds is None else np.asarray(policy.folds)
         self.arrive_m, self.still_m, self.settle_frames = policy.arrive_m, policy.still_m, policy.settle_frames
         self.classes = np.asarray(policy.classes)
         self.C = int(policy.n_classes)
@@ -151,9 +175,7 @@ class Stepper:
             current = relative(world[rows, tool], world[rows, target]).astype(np.float32)
             pair_classes = f(np.concatenate([self.class_codes[tool], self.class_codes[target]], -1))
             pair_flags = f(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
-            w = norm.unscale("waypoint", mixture_mode(net.pi_m(pair_classes, norm("current", f(current)), pair_flags,
-                                                                 norm("waypoint", f(current))))).numpy()
-            w = np.concatenate([w[:, :3], normalize_quat(w[:, 3:].astype(np.float64))], -1).astype(np.float32)
+            w = pi_m_waypoint(self.policy, pair_classes, current, pair_flags, self.folds[target])
             if forced is not None:
                 w = forced[2].astype(np.float32)
             elif self.prev is not None:
