@@ -245,7 +245,8 @@ def turned_about_z(poses: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 CONTINUOUS_VIEWS = 8
-"""A target with a continuous symmetry is seen from this many turns at run time."""
+"""A way-point on a target with a continuous symmetry is compared with its turns by this
+many steps of a revolution."""
 
 
 def sector_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hsp.policy.features import FLAGS, one_hot, remaining_way, sector_turns, turned_about_z, views, way_length
+from hsp.policy.features import FLAGS, one_hot, remaining_way, sector_turns, turned_about_z, way_length
 from hsp.geometry import normalize_quat, relative
 from hsp.policy.networks import mixture_mode
 
@@ -41,20 +41,15 @@ def pi_m_waypoint(policy, classes: torch.Tensor, current: np.ndarray, flags: tor
     ``(..., 7)`` for pairs of labels ``classes``, p_t[o+, o*] ``current`` ``(..., 7)`` and
     flags, on targets whose symmetry has ``folds`` ``(...)``. π_m learns every decision
     seen from the turn of its target that puts the way-point in the canonical sector
-    (:func:`~hsp.policy.features.sector_turns`), so it is asked from every turn of the
-    target and keeps the answer that lands nearest that sector, turned back."""
+    (:func:`~hsp.policy.features.sector_turns`); it is asked from the turn that puts the
+    tool there (where a way-point follows the tool, a lift, the two coincide; where it does
+    not, a place beside a cube, π_m learnt one answer for every side the tool comes from),
+    and its answer is turned back."""
     norm, net = policy.norm, policy.net
-    angle, valid = views(folds)  # (..., S)
-    S = angle.shape[-1]
-    seen = turned_about_z(np.repeat(np.asarray(current, np.float64)[..., None, :], S, -2), angle)  # (..., S, 7)
-    x = torch.from_numpy(seen.astype(np.float32))
-    expand = lambda t: t.unsqueeze(-2).expand(*t.shape[:-1], S, t.shape[-1])  # noqa: E731
-    w = norm.unscale("waypoint", mixture_mode(net.pi_m(expand(classes), norm("current", x), expand(flags),
-                                                       norm("waypoint", x)))).numpy().astype(np.float64)
-    off = np.where(valid, np.abs(sector_turns(w, folds[..., None])), np.inf)
-    pick = off.argmin(-1)[..., None]
-    chosen = np.take_along_axis(w, pick[..., None], -2)[..., 0, :]
-    w = turned_about_z(chosen, -np.take_along_axis(angle, pick, -1)[..., 0])
+    angle = sector_turns(np.asarray(current, np.float64), folds)
+    x = torch.from_numpy(turned_about_z(np.asarray(current, np.float64), angle).astype(np.float32))
+    w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), flags, norm("waypoint", x))))
+    w = turned_about_z(w.numpy().astype(np.float64), -angle)
     return np.concatenate([w[..., :3], normalize_quat(w[..., 3:])], -1).astype(np.float32)
 
 
