@@ -7,9 +7,9 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
   :mod:`~hsp.labeling.equivalence`: L_o* + L_w is then the set's joint likelihood, so the
   member whose frame explains the way-point best is learnt);
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
-  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from a
-  random symmetric equivalent of the target (a cube turned by a quarter turn looks the
-  same, so the demonstration could have been that one);
+  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from the turn
+  of a symmetric target that puts w_t in one sector (a cube's four sides are one place,
+  :func:`turned`);
 * all three on the decision frames only (the paper sums L_o+ and L_o* over every frame),
   where a sub-task has ended and the next tool, target and way-point are chosen: a
   sub-task runs until its tool comes to rest (:class:`~hsp.policy.stepper.Stepper`), so
@@ -165,9 +165,9 @@ def forward(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, 
     pick = (lambda x: x) if at is None else (lambda x: x[at])  # noqa: E731
     objects, context = net.read(norm, codes, *map(pick, (b["world"], b["ee_in_object"], b["flags"], b["tracked"],
                                                           b["progress"], b["done"], memory)))
-    tool = pick(b["tool"])
+    chosen = pick(b["tool"])
     log_tool = net.pi_tool(objects, context)
-    log_target = net.pi_target(objects, norm("tool_in_object", pick(b["tool_in_object"])), codes[tool], context, tool)
+    log_target = net.pi_target(objects, norm("tool_in_object", pick(b["tool_in_object"])), codes[chosen], context, chosen)
     tool, target = b["tool"], b["target"]
     pair_classes = torch.cat([codes[tool], codes[target]], -1)
     current = norm("current", b["current"])
@@ -342,8 +342,9 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     """π_h, π_m, π_l fitted to labelled ``episodes``; with ``held_out`` episodes, the
     checkpoint that decides best on them (``decision_subtask_accuracy``, then the smaller
     way-point error) is returned. With
-    ``folds`` (each object's turns about z that leave it unchanged), π_m also learns every
-    decision as seen from its target's symmetric equivalents (:func:`turned`). Returns
+    ``folds`` (each object's turns about z that leave it unchanged), π_m learns every
+    decision seen from the turn of its target that puts the way-point in one sector
+    (:func:`turned`). Returns
     the policy and a report: the last losses, and where a checkpoint was chosen, its
     iteration and validation figures."""
     if not episodes:
