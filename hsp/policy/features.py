@@ -236,21 +236,38 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
 
 
-def symmetric_turns(folds: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Angles (rad) of turns about a target's z axis that leave it unchanged, one per entry of
-    ``folds`` (its turns per revolution, :func:`~hsp.geometry.symmetry.z_folds`: 0 for a
-    continuous symmetry, 1 for none) drawn by ``u`` ∈ [0, 1) (same shape): 2πu, or the
-    multiple of 2π/folds that u falls on."""
-    k = np.asarray(folds)
-    return np.where(k == 0, 2 * np.pi * u, 2 * np.pi * np.floor(u * np.maximum(k, 1)) / np.maximum(k, 1))
-
-
 def turned_about_z(poses: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Poses in a target's frame ``(..., 7)`` as seen from the target turned by ``angle``
     ``(...)`` about its own z axis: for a turn in its symmetry, the same scene."""
     turn = np.zeros(np.shape(angle) + (7,))
     turn[..., 3:] = Rotation.from_euler("z", np.reshape(angle, (-1, 1))).as_quat().reshape(turn.shape[:-1] + (4,))
     return compose(turn, poses)
+
+
+CONTINUOUS_VIEWS = 8
+"""A way-point on a target with a continuous symmetry is compared with its turns by this
+many steps of a revolution."""
+
+
+def sector_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:
+    """The turn (rad) about a target's z axis, among those that leave it unchanged
+    (``folds`` per entry, broadcast against ``poses``' leading axes; 0: any turn), that
+    brings the position of ``poses`` ``(..., 7)`` in its frame into the canonical sector:
+    within ±π/folds of the x axis (a continuous symmetry: onto it)."""
+    phi = np.arctan2(poses[..., 1], poses[..., 0])
+    k = np.broadcast_to(np.asarray(folds), phi.shape)
+    step = 2 * np.pi / np.maximum(k, 1)
+    return np.where(k == 0, -phi, np.where(k == 1, 0.0, -np.round(phi / step) * step))
+
+
+def views(folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every turn (rad) that leaves each target unchanged (``folds`` ``(...)``; a continuous
+    symmetry every 360°/:data:`CONTINUOUS_VIEWS`) ``(..., S)``, the first none, and whether
+    each is one of that target's ``(..., S)``."""
+    k = np.where(np.asarray(folds) == 0, CONTINUOUS_VIEWS, np.maximum(folds, 1))
+    S = int(k.max(initial=1))
+    valid = np.arange(S) < k[..., None]
+    return np.where(valid, 2 * np.pi * np.arange(S) / k[..., None], 0.0), valid
 
 
 STEP_FIELDS = tuple(f.name for f in fields(Steps))

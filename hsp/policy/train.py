@@ -7,9 +7,9 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
   :mod:`~hsp.labeling.equivalence`: L_o* + L_w is then the set's joint likelihood, so the
   member whose frame explains the way-point best is learnt);
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
-  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from a
-  random symmetric equivalent of the target (a cube turned by a quarter turn looks the
-  same, so the demonstration could have been that one);
+  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from the turn
+  of a symmetric target that puts w_t in one sector (a cube's four sides are one place,
+  :func:`turned`);
 * all three on the decision frames only (the paper sums L_o+ and L_o* over every frame),
   where a sub-task has ended and the next tool, target and way-point are chosen: a
   sub-task runs until its tool comes to rest (:class:`~hsp.policy.stepper.Stepper`), so
@@ -44,10 +44,10 @@ from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
-from hsp.policy.features import STEP_FIELDS, Steps, one_hot, symmetric_turns, turned_about_z
-from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob, mixture_mode
+from hsp.policy.features import STEP_FIELDS, Steps, one_hot, sector_turns, turned_about_z, views
+from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob
 from hsp.policy.normalisation import Normalisation
-from hsp.policy.stepper import Stepper
+from hsp.policy.stepper import Stepper, pi_m_waypoint
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +105,10 @@ class Policy:
     still_m: float = TrainConfig.still_m
     settle_frames: int = TrainConfig.settle_frames
     """A sub-task runs until its tool rests at its way-point: :class:`~hsp.policy.stepper.Stepper`."""
+    folds: np.ndarray | None = None
+    """Per object, its turns about z that leave it unchanged (0: any; None: none known):
+    π_m sees each decision from the turn of its target that puts the way-point in one
+    sector (:func:`turned`, :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
 
 
 def batch(episodes: list[Steps], idx: list[int]) -> dict[str, torch.Tensor]:
@@ -127,20 +131,22 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.where(mask, x, 0.0).sum() / mask.sum().clamp(min=1)
 
 
-def turned(b: dict[str, torch.Tensor], folds: np.ndarray, rng: np.random.Generator) -> dict[str, torch.Tensor]:
-    """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from a symmetric
-    equivalent of each candidate target j (a turn about its z axis that leaves it
-    unchanged, one draw per episode; ``folds`` per object,
-    :func:`~hsp.policy.features.symmetric_turns`), as ``turned_candidate_current`` and
-    ``turned_candidate_waypoint`` beside the rest of ``b``."""
+def turned(b: dict[str, torch.Tensor], folds: np.ndarray) -> dict[str, torch.Tensor]:
+    """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from the turn of
+    each candidate target j that leaves it unchanged and puts the way-point in the
+    canonical sector (``folds`` per object, :func:`~hsp.policy.features.sector_turns`), as
+    ``turned_candidate_current`` and ``turned_candidate_waypoint`` beside the rest of ``b``.
+    A cube's four sides are one place, and which of them the demonstrator used depends on
+    how the cube's frame was chosen, which nothing observed tells: seen so, the four
+    become one (a mixture fitted to all four put its mean in the middle of them)."""
     B, T, n = b["candidate_current"].shape[:3]
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
-    u = np.broadcast_to(rng.random((B, 1, 1)), (B, T, n))
-    angle = symmetric_turns(np.broadcast_to(folds, (B, T, n)), u)[real]
+    waypoint = b["candidate_waypoint"].numpy()[real].astype(np.float64)  # (D, n, 7)
+    angle = sector_turns(waypoint, np.broadcast_to(folds, waypoint.shape[:-1]))
 
     def f(x: torch.Tensor) -> torch.Tensor:
         out = x.numpy().copy()
-        out[real] = turned_about_z(out[real], angle)
+        out[real] = turned_about_z(out[real].astype(np.float64), angle)
         return torch.from_numpy(out)
 
     return b | {"turned_candidate_current": f(b["candidate_current"]),
@@ -159,9 +165,9 @@ def forward(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, 
     pick = (lambda x: x) if at is None else (lambda x: x[at])  # noqa: E731
     objects, context = net.read(norm, codes, *map(pick, (b["world"], b["ee_in_object"], b["flags"], b["tracked"],
                                                           b["progress"], b["done"], memory)))
-    tool = pick(b["tool"])
+    chosen = pick(b["tool"])
     log_tool = net.pi_tool(objects, context)
-    log_target = net.pi_target(objects, norm("tool_in_object", pick(b["tool_in_object"])), codes[tool], context, tool)
+    log_target = net.pi_target(objects, norm("tool_in_object", pick(b["tool_in_object"])), codes[chosen], context, chosen)
     tool, target = b["tool"], b["target"]
     pair_classes = torch.cat([codes[tool], codes[target]], -1)
     current = norm("current", b["current"])
@@ -263,6 +269,15 @@ def free_run(policy: Policy, episodes: list[Steps]) -> dict[str, np.ndarray]:
     return {"tool": tool, "target": target, "waypoint": waypoint}
 
 
+def waypoint_distance(policy: Policy, w: np.ndarray, label: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Distance (m) of way-points ``w`` from the nearest turn of ``label`` (both ``(..., 7)``)
+    by the symmetry of ``target`` ``(...)``: the same place on a symmetric target."""
+    folds = np.ones_like(target) if policy.folds is None else np.asarray(policy.folds)[target]
+    angle, valid = views(folds)
+    members = turned_about_z(np.repeat(label[..., None, :].astype(np.float64), angle.shape[-1], -2), angle)
+    return np.where(valid, np.linalg.norm(members[..., :3] - w[..., None, :3], axis=-1), np.inf).min(-1)
+
+
 def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     """On ``episodes`` (a target counts as right when it is in the label's equivalence set,
     the way-point then compared with the label's in its frame): π_h's pair accuracy running free over the labelled frames, beside
@@ -279,9 +294,16 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     first[:, 0] = True
     decided = (b["labelled"] & b["frame"] & b["decision"]).numpy() & ~first
     at = torch.from_numpy(decided).nonzero(as_tuple=True)
+    codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))
+    tool_at, target_at = b["tool"][at], b["target"][at]
+    rows = torch.arange(len(tool_at))
+    flags = b["flags"][at]
+    folds = np.ones(len(policy.classes), np.int64) if policy.folds is None else np.asarray(policy.folds)
     with torch.no_grad():
         out = forward(policy, b, at)
-        modes = mixture_mode(candidate_mixtures(policy, b, at))  # (D, n, 7)
+        tf_w = pi_m_waypoint(policy, torch.cat([codes[tool_at], codes[target_at]], -1),
+                             b["candidate_current"][at][rows, target_at].numpy(),
+                             torch.cat([flags[rows, tool_at], flags[rows, target_at]], -1), folds[target_at.numpy()])
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
     tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
@@ -289,13 +311,14 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     member = lambda j: np.take_along_axis(members, j[..., None], -1)[..., 0]  # noqa: E731
     tf_tool = out["log_tool"].argmax(-1).numpy()  # at the decisions
     tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
-    tf_w = policy.norm.unscale("waypoint", modes[torch.arange(len(modes)), b["target"][at]]).numpy()  # the labelled target's
-    tf_w_err = np.linalg.norm(tf_w[:, :3] - w[decided][:, :3], axis=-1)  # at the decisions, in their order
+    tf_w_err = waypoint_distance(policy, tf_w, w[decided], target[decided])  # at the decisions, in their order
     tf_right = (tf_tool == tool[decided]) & np.take_along_axis(members[decided], tf_target[:, None], -1)[:, 0]
     free = free_run(policy, episodes)
     free_pair = (free["tool"] == tool) & member(free["target"])
     free_label = np.take_along_axis(b["candidate_waypoint"].numpy(), free["target"][..., None, None], 2)[:, :, 0]
-    free_w_err = np.linalg.norm(free["waypoint"][..., :3] - free_label[..., :3], axis=-1)
+    free_w_err = np.full(labelled.shape, np.inf)
+    free_w_err[labelled] = waypoint_distance(policy, free["waypoint"][labelled], free_label[labelled],
+                                             free["target"][labelled])
     copy = np.zeros_like(labelled)
     copy[:, 1:] = (tool[:, 1:] == tool[:, :-1]) & (target[:, 1:] == target[:, :-1])
     a_err = np.linalg.norm((out["action"].numpy() - b["action"].numpy())[..., :3], axis=-1)
@@ -319,8 +342,9 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     """π_h, π_m, π_l fitted to labelled ``episodes``; with ``held_out`` episodes, the
     checkpoint that decides best on them (``decision_subtask_accuracy``, then the smaller
     way-point error) is returned. With
-    ``folds`` (each object's turns about z that leave it unchanged), π_m also learns every
-    decision as seen from its target's symmetric equivalents (:func:`turned`). Returns
+    ``folds`` (each object's turns about z that leave it unchanged), π_m learns every
+    decision seen from the turn of its target that puts the way-point in one sector
+    (:func:`turned`). Returns
     the policy and a report: the last losses, and where a checkpoint was chosen, its
     iteration and validation figures."""
     if not episodes:
@@ -332,7 +356,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     rng = np.random.default_rng(seed)
     net = Hierarchy(Sizes(len(objects), n_classes, cfg.hidden, cfg.memory, cfg.min_fraction, cfg.modes))
     policy = Policy(net, Normalisation.fit(episodes), objects, np.asarray(classes), n_classes, cfg.arrive_m,
-                    cfg.still_m, cfg.settle_frames)
+                    cfg.still_m, cfg.settle_frames, None if folds is None else np.asarray(folds))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.iterations)
     lengths = np.array([len(e) for e in episodes])
@@ -342,7 +366,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
         b = batch(episodes, list(order[:take]))
-        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds), rng))
+        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds)))
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()
@@ -379,7 +403,8 @@ def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
         save_file(tensors, tmp / "model.safetensors")
         config = {"format": FORMAT, "train": asdict(cfg), "sizes": asdict(policy.net.sizes), "objects": policy.objects,
                   "classes": policy.classes.tolist(), "n_classes": policy.n_classes, "arrive_m": policy.arrive_m, "still_m": policy.still_m,
-                  "settle_frames": policy.settle_frames}
+                  "settle_frames": policy.settle_frames,
+                  "folds": None if policy.folds is None else np.asarray(policy.folds).tolist()}
         (tmp / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
 
@@ -398,7 +423,8 @@ def load(model_dir: Path) -> Policy:
         net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
         norm = Normalisation({k[5:]: v for k, v in tensors.items() if k.startswith("norm.")})
         return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"],
-                      config["arrive_m"], config["still_m"], config["settle_frames"])
+                      config["arrive_m"], config["still_m"], config["settle_frames"],
+                      None if config.get("folds") is None else np.asarray(config["folds"]))
     except (SafetensorError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise HspError(f"{model_dir}: not a trained policy of this hsp version (retrain with `hsp train`): {first}") from None

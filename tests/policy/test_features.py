@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, relative
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import episode_steps, history_flags, symmetric_turns, turned_about_z
+from hsp.policy.features import episode_steps, history_flags, sector_turns, turned_about_z
 from tests.labeling.test_em import _episode
 
 CLASSES = np.array([0, 1, 1])
@@ -111,8 +111,14 @@ def test_a_turned_pose_is_the_tool_turned_about_the_targets_z_axis():
     np.testing.assert_allclose(np.abs(np.sum(got[:, 3:] * want[:, 3:], 1)), 1.0, atol=1e-9)
 
 
-def test_symmetric_turns_are_those_that_leave_the_target_unchanged():
-    u = np.array([0.0, 0.3, 0.6, 0.99])
-    np.testing.assert_allclose(symmetric_turns(np.full(4, 4), u), [0, np.pi / 2, np.pi, 3 * np.pi / 2])  # a cube
-    np.testing.assert_allclose(symmetric_turns(np.full(4, 1), u), 0.0)  # no symmetry: never turned
-    np.testing.assert_allclose(symmetric_turns(np.zeros(4), u), 2 * np.pi * u)  # a cylinder: any turn
+def test_the_sector_turn_brings_a_way_point_within_half_a_fold_of_the_x_axis():
+    w = np.zeros((4, 7))
+    w[:, 6] = 1.0
+    w[:, :2] = [[0.0, 0.05], [-0.05, 0.001], [0.03, -0.04], [0.01, 0.02]]
+    cube = sector_turns(w, np.array([4, 4, 4, 1]))
+    np.testing.assert_allclose(cube, [-np.pi / 2, -np.pi, np.pi / 2, 0.0], atol=1e-9)
+    turned = turned_about_z(w, cube)
+    assert (np.abs(np.arctan2(turned[:3, 1], turned[:3, 0])) <= np.pi / 4 + 1e-9).all()
+    any_turn = turned_about_z(w, sector_turns(w, np.zeros(4, int)))
+    np.testing.assert_allclose(any_turn[:, 1], 0.0, atol=1e-12)
+    assert (any_turn[:, 0] > 0).all()

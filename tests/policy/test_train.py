@@ -8,7 +8,8 @@ from hsp.errors import HspError
 from hsp.policy.networks import LOG_SQRT_2PI, Hierarchy, Sizes
 from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper
-from hsp.policy.train import FORMAT, Policy, TrainConfig, batch, forward, load, losses, save, split, train, validate
+from hsp.policy.train import (FORMAT, Policy, TrainConfig, batch, forward, load, losses, save, split, train, validate,
+                              waypoint_distance)
 from hsp.policy.features import episode_steps
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig
@@ -208,3 +209,11 @@ def test_every_fifth_episode_validates_and_free_running_is_reported_beside_its_b
                 "free_subtask_accuracy", "waypoint_error_mm_free", "waypoint_error_mm_teacher_forced", "action_error_mm"):
         assert key in figures
     assert figures["pair_accuracy_copy_previous"] > 0.9  # one switch in 40 frames
+
+
+def test_a_way_point_is_as_far_from_a_label_as_from_its_nearest_symmetric_equivalent():
+    policy = _blank_policy(_data())
+    policy.folds = np.array([1, 4, 1])
+    beside, other_side = np.array([0.05, 0, 0, 0, 0, 0, 1.0]), np.array([0, 0.05, 0, 0, 0, 0, 1.0])
+    d = waypoint_distance(policy, np.stack([other_side] * 2), np.stack([beside] * 2), np.array([1, 2]))
+    np.testing.assert_allclose(d, [0.0, 0.05 * np.sqrt(2)], atol=1e-9)
