@@ -35,20 +35,24 @@ from hsp.geometry import normalize_quat, relative
 from hsp.policy.networks import mixture_mode
 
 
-def pi_m_waypoint(policy, classes: torch.Tensor, current: np.ndarray, flags: torch.Tensor, folds: np.ndarray
+def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndarray, flags: np.ndarray
                   ) -> np.ndarray:
     """π_m's way-point w_t (the heaviest component's mean, physical units, unit quaternion)
-    ``(..., 7)`` for pairs of labels ``classes``, p_t[o+, o*] ``current`` ``(..., 7)`` and
-    flags, on targets whose symmetry has ``folds`` ``(...)``. π_m learns every decision
+    ``(B, 7)`` for the pairs (``tool``, ``target``) ``(B,)`` with p_t[o+, o*] ``current``
+    ``(B, 7)`` and every object's history flags ``(B, n, FLAGS)``. π_m learns every decision
     seen from the turn of its target that puts the way-point in the canonical sector
     (:func:`~hsp.policy.features.sector_turns`); it is asked from the turn that puts the
     tool there (where a way-point follows the tool, a lift, the two coincide; where it does
     not, a place beside a cube, π_m learnt one answer for every side the tool comes from),
     and its answer is turned back."""
+    codes = one_hot(np.asarray(policy.classes), policy.n_classes)
+    rows = np.arange(len(tool))
+    classes = torch.from_numpy(np.concatenate([codes[tool], codes[target]], -1))
+    pair_flags = torch.from_numpy(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
     norm, net = policy.norm, policy.net
-    angle = sector_turns(np.asarray(current, np.float64), folds)
+    angle = sector_turns(np.asarray(current, np.float64), policy.object_folds()[target])
     x = torch.from_numpy(turned_about_z(np.asarray(current, np.float64), angle).astype(np.float32))
-    w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), flags, norm("waypoint", x))))
+    w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), pair_flags, norm("waypoint", x))))
     w = turned_about_z(w.numpy().astype(np.float64), -angle)
     return np.concatenate([w[..., :3], normalize_quat(w[..., 3:])], -1).astype(np.float32)
 
@@ -80,7 +84,6 @@ class Stepper:
 
     def __init__(self, policy, batch: int = 1) -> None:
         self.policy, self.net, self.norm = policy, policy.net, policy.norm
-        self.folds = np.ones(len(policy.classes), np.int64) if policy.folds is None else np.asarray(policy.folds)
         self.arrive_m, self.still_m, self.settle_frames = policy.arrive_m, policy.still_m, policy.settle_frames
         self.classes = np.asarray(policy.classes)
         self.C = int(policy.n_classes)
@@ -169,8 +172,7 @@ class Stepper:
             target = np.where(decide, log_target.argmax(-1).numpy(), self._kept(1)) if forced is None else forced[1]
             current = relative(world[rows, tool], world[rows, target]).astype(np.float32)
             pair_classes = f(np.concatenate([self.class_codes[tool], self.class_codes[target]], -1))
-            pair_flags = f(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
-            w = pi_m_waypoint(self.policy, pair_classes, current, pair_flags, self.folds[target])
+            w = pi_m_waypoint(self.policy, tool, target, current, flags)
             if forced is not None:
                 w = forced[2].astype(np.float32)
             elif self.prev is not None:

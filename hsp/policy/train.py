@@ -110,6 +110,10 @@ class Policy:
     π_m sees each decision from the turn of its target that puts the way-point in one
     sector (:func:`turned`, :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
 
+    def object_folds(self) -> np.ndarray:
+        """:attr:`folds`, or 1 (no turn but none) for every object when none is known."""
+        return np.ones(len(self.classes), np.int64) if self.folds is None else np.asarray(self.folds)
+
 
 def batch(episodes: list[Steps], idx: list[int]) -> dict[str, torch.Tensor]:
     """Episodes ``idx`` padded to one length, with a mask of real frames (``frame``)."""
@@ -139,7 +143,6 @@ def turned(b: dict[str, torch.Tensor], folds: np.ndarray) -> dict[str, torch.Ten
     A cube's four sides are one place, and which of them the demonstrator used depends on
     how the cube's frame was chosen, which nothing observed tells: seen so, the four
     become one (a mixture fitted to all four put its mean in the middle of them)."""
-    B, T, n = b["candidate_current"].shape[:3]
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
     waypoint = b["candidate_waypoint"].numpy()[real].astype(np.float64)  # (D, n, 7)
     angle = sector_turns(waypoint, np.broadcast_to(folds, waypoint.shape[:-1]))
@@ -272,8 +275,7 @@ def free_run(policy: Policy, episodes: list[Steps]) -> dict[str, np.ndarray]:
 def waypoint_distance(policy: Policy, w: np.ndarray, label: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Distance (m) of way-points ``w`` from the nearest turn of ``label`` (both ``(..., 7)``)
     by the symmetry of ``target`` ``(...)``: the same place on a symmetric target."""
-    folds = np.ones_like(target) if policy.folds is None else np.asarray(policy.folds)[target]
-    angle, valid = views(folds)
+    angle, valid = views(policy.object_folds()[target])
     members = turned_about_z(np.repeat(label[..., None, :].astype(np.float64), angle.shape[-1], -2), angle)
     return np.where(valid, np.linalg.norm(members[..., :3] - w[..., None, :3], axis=-1), np.inf).min(-1)
 
@@ -294,16 +296,12 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     first[:, 0] = True
     decided = (b["labelled"] & b["frame"] & b["decision"]).numpy() & ~first
     at = torch.from_numpy(decided).nonzero(as_tuple=True)
-    codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))
-    tool_at, target_at = b["tool"][at], b["target"][at]
-    rows = torch.arange(len(tool_at))
-    flags = b["flags"][at]
-    folds = np.ones(len(policy.classes), np.int64) if policy.folds is None else np.asarray(policy.folds)
+    tool_at, target_at = b["tool"][at].numpy(), b["target"][at].numpy()
     with torch.no_grad():
         out = forward(policy, b, at)
-        tf_w = pi_m_waypoint(policy, torch.cat([codes[tool_at], codes[target_at]], -1),
-                             b["candidate_current"][at][rows, target_at].numpy(),
-                             torch.cat([flags[rows, tool_at], flags[rows, target_at]], -1), folds[target_at.numpy()])
+        tf_w = pi_m_waypoint(policy, tool_at, target_at,
+                             b["candidate_current"][at].numpy()[np.arange(len(target_at)), target_at],
+                             b["flags"][at].numpy())
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
     tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
