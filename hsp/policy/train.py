@@ -51,7 +51,7 @@ from hsp.policy.stepper import Stepper, pi_m_waypoint
 
 log = logging.getLogger(__name__)
 
-FORMAT = 4
+FORMAT = 5
 """Layout of saved models; older ones are refused with a clear message."""
 WAYPOINT_HIT_M = 0.02
 """A way-point agrees with the label when within this (m)."""
