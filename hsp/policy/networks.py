@@ -5,10 +5,14 @@
   form the context every level reads.
 * π_h: two softmax heads, tool and target (the paper's L_o+ and L_o*). Each scores every
   object with one MLP (two hidden layers of 64) from that object's features (semantic
-  label, world pose, the end-effector in its frame, history flags, tracked) and the
-  context, so identical objects are interchangeable. The target head also reads the tool
-  in the candidate's frame and the tool's label; the end-effector and the tool itself are
-  never targets.
+  label, its height and tilt, the end-effector in its frame, history flags, tracked) and
+  the context, so identical objects are interchangeable. The target head also reads the
+  tool in the candidate's frame and the tool's label; the end-effector and the tool itself
+  are never targets. Of world poses (the objects', e_t) π_h reads only what does not
+  change when the whole scene is moved or turned on the table (:func:`upright`): which
+  object comes next does not depend on where the layout lies, and with x, y and heading
+  the few training episodes were told apart by their layouts (stacking-2, 20 held-out
+  layouts: 0 → 2 successes; held-out decisions fell from iteration 2,000 on, 0.82 → 0.73).
 * π_m: the pair's labels and history flags and p_t[o+, o*] → two hidden layers of 64 →
   a mixture of diagonal Gaussians over w_t (7), trained by its negative log-likelihood
   (L_w); the robot takes the mean of the heaviest component. ``modes`` components have
@@ -57,6 +61,18 @@ def mlp(d_in: int, d_out: int, hidden: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(d_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, d_out))
 
 
+def upright(world: torch.Tensor) -> torch.Tensor:
+    """What of world poses ``(..., 7)`` stays when the scene is moved or turned about the
+    vertical: the height z and the cosine of the object's tilt (its z axis against the
+    world's) ``(..., 2)``."""
+    x, y = world[..., 3], world[..., 4]
+    return torch.stack([world[..., 2], 1 - 2 * (x * x + y * y)], -1)
+
+
+UPRIGHT = 2
+"""Features of :func:`upright`."""
+
+
 def gaussian_log_prob(mean: torch.Tensor, log_std: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """Diagonal Gaussian log-density, summed over the last axis."""
     z = (x - mean) * torch.exp(-log_std)
@@ -91,13 +107,13 @@ class Sizes:
 
     @property
     def object_features(self) -> int:
-        """Label, world pose, end-effector in the object's frame, flags, tracked."""
-        return self.classes + 7 + 7 + FLAGS + 1
+        """Label, upright pose, end-effector in the object's frame, flags, tracked."""
+        return self.classes + UPRIGHT + 7 + FLAGS + 1
 
     @property
     def context(self) -> int:
-        """e_t, M(h_t), embedded g_t, done fractions."""
-        return 7 + self.memory + self.hidden + self.classes
+        """e_t (upright), M(h_t), embedded g_t, done fractions."""
+        return UPRIGHT + self.memory + self.hidden + self.classes
 
 
 class Hierarchy(nn.Module):
@@ -126,12 +142,15 @@ class Hierarchy(nn.Module):
     def read(self, norm: "Normalisation", codes: torch.Tensor, world: torch.Tensor, ee_in_object: torch.Tensor,
              flags: torch.Tensor, tracked: torch.Tensor, progress: torch.Tensor, done: torch.Tensor,
              memory: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The per-object features ``(..., n, F)`` and the context ``(..., D)`` that π_h, π_m
-        read, from raw world poses ``(..., n, 7)``, the end-effector in each object's frame,
+        """The per-object features ``(..., n, F)`` and the context ``(..., D)`` that π_h
+        reads, from raw world poses ``(..., n, 7)`` (of which :func:`upright`), the end-effector in each object's frame,
         history flags ``(..., n, 3)``, tracked ``(..., n)`` bool, g_t, done fractions and
         M(h_t); ``codes`` are the objects' one-hot labels ``(n, C)``."""
-        context = self.context(norm("world", world[..., 0, :]), memory, norm("progress", progress), done)
-        objects = torch.cat([codes.expand(*world.shape[:-1], -1), norm("world", world), norm("ee_in_object", ee_in_object),
+        mean, std = norm.stats["world.mean"][2], norm.stats["world.std"][2]
+        pose = upright(world)
+        pose = torch.cat([(pose[..., :1] - mean) / std, pose[..., 1:]], -1)  # the cosine as it is
+        context = self.context(pose[..., 0, :], memory, norm("progress", progress), done)
+        objects = torch.cat([codes.expand(*world.shape[:-1], -1), pose, norm("ee_in_object", ee_in_object),
                              flags, tracked[..., None].float()], -1)
         return objects, context
 
