@@ -249,20 +249,15 @@ CONTINUOUS_VIEWS = 8
 many steps of a revolution."""
 
 
-def sector_turns(poses: np.ndarray, folds: np.ndarray, radius: float = 0.0) -> np.ndarray:
+def sector_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:
     """The turn (rad) about a target's z axis, among those that leave it unchanged
     (``folds`` per entry, broadcast against ``poses``' leading axes; 0: any turn), that
     brings the position of ``poses`` ``(..., 7)`` in its frame into the canonical sector:
-    within ±π/folds of the x axis (a continuous symmetry: onto it). None for a position
-    within ``radius`` of the axis: there the direction is the labels' scatter, and folding
-    a scatter into one sector moves its mean off the axis by about its size (a place on
-    top of a block 2–3 mm to the side the tool came from, which two levels of a tower add
-    past the 5 mm tolerance)."""
+    within ±π/folds of the x axis (a continuous symmetry: onto it)."""
     phi = np.arctan2(poses[..., 1], poses[..., 0])
     k = np.broadcast_to(np.asarray(folds), phi.shape)
     step = 2 * np.pi / np.maximum(k, 1)
-    turn = np.where(k == 0, -phi, np.where(k == 1, 0.0, -np.round(phi / step) * step))
-    return np.where(np.hypot(poses[..., 0], poses[..., 1]) < radius, 0.0, turn)
+    return np.where(k == 0, -phi, np.where(k == 1, 0.0, -np.round(phi / step) * step))
 
 
 def views(folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -50,7 +50,7 @@ def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndar
     classes = torch.from_numpy(np.concatenate([codes[tool], codes[target]], -1))
     pair_flags = torch.from_numpy(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
     norm, net = policy.norm, policy.net
-    angle = sector_turns(np.asarray(current, np.float64), policy.object_folds()[target], policy.sector_radius_m)
+    angle = sector_turns(np.asarray(current, np.float64), policy.object_folds()[target])
     x = torch.from_numpy(turned_about_z(np.asarray(current, np.float64), angle).astype(np.float32))
     w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), pair_flags, norm("waypoint", x))))
     w = turned_about_z(w.numpy().astype(np.float64), -angle)

@@ -89,11 +89,6 @@ class TrainConfig:
     """... and running, once the tool has been within this of its way-point, or stopped
     short of it, ``settle_frames`` frames in a row (:class:`~hsp.policy.stepper.Stepper`)."""
     settle_frames: int = 3
-    sector_radius_m: float = 0.01
-    """π_m's way-points within this of their target's vertical axis (a place on top, a grasp)
-    are not turned into the canonical sector (:func:`~hsp.policy.features.sector_turns`):
-    their direction from the axis is the labels' scatter (millimetres), not a side of the
-    target (a place beside a block is 5 cm out)."""
 
 
 @dataclass
@@ -113,9 +108,7 @@ class Policy:
     folds: np.ndarray | None = None
     """Per object, its turns about z that leave it unchanged (0: any; None: none known):
     π_m sees each decision from the turn of its target that puts the way-point in one
-    sector (:func:`turned`, :func:`~hsp.policy.stepper.pi_m_waypoint`) ..."""
-    sector_radius_m: float = TrainConfig.sector_radius_m
-    """... unless it lies within this of the target's axis."""
+    sector (:func:`turned`, :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
 
     def object_folds(self) -> np.ndarray:
         """:attr:`folds`, or 1 (no turn but none) for every object when none is known."""
@@ -142,7 +135,7 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.where(mask, x, 0.0).sum() / mask.sum().clamp(min=1)
 
 
-def turned(b: dict[str, torch.Tensor], folds: np.ndarray, radius: float = 0.0) -> dict[str, torch.Tensor]:
+def turned(b: dict[str, torch.Tensor], folds: np.ndarray) -> dict[str, torch.Tensor]:
     """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from the turn of
     each candidate target j that leaves it unchanged and puts the way-point in the
     canonical sector (``folds`` per object, :func:`~hsp.policy.features.sector_turns`), as
@@ -152,7 +145,7 @@ def turned(b: dict[str, torch.Tensor], folds: np.ndarray, radius: float = 0.0) -
     become one (a mixture fitted to all four put its mean in the middle of them)."""
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
     waypoint = b["candidate_waypoint"].numpy()[real].astype(np.float64)  # (D, n, 7)
-    angle = sector_turns(waypoint, np.broadcast_to(folds, waypoint.shape[:-1]), radius)
+    angle = sector_turns(waypoint, np.broadcast_to(folds, waypoint.shape[:-1]))
 
     def f(x: torch.Tensor) -> torch.Tensor:
         out = x.numpy().copy()
@@ -361,7 +354,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     rng = np.random.default_rng(seed)
     net = Hierarchy(Sizes(len(objects), n_classes, cfg.hidden, cfg.memory, cfg.min_fraction, cfg.modes))
     policy = Policy(net, Normalisation.fit(episodes), objects, np.asarray(classes), n_classes, cfg.arrive_m,
-                    cfg.still_m, cfg.settle_frames, None if folds is None else np.asarray(folds), cfg.sector_radius_m)
+                    cfg.still_m, cfg.settle_frames, None if folds is None else np.asarray(folds))
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.iterations)
     lengths = np.array([len(e) for e in episodes])
@@ -371,7 +364,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
         b = batch(episodes, list(order[:take]))
-        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds), cfg.sector_radius_m))
+        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds)))
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()
@@ -409,8 +402,7 @@ def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:
         config = {"format": FORMAT, "train": asdict(cfg), "sizes": asdict(policy.net.sizes), "objects": policy.objects,
                   "classes": policy.classes.tolist(), "n_classes": policy.n_classes, "arrive_m": policy.arrive_m, "still_m": policy.still_m,
                   "settle_frames": policy.settle_frames,
-                  "folds": None if policy.folds is None else np.asarray(policy.folds).tolist(),
-                  "sector_radius_m": policy.sector_radius_m}
+                  "folds": None if policy.folds is None else np.asarray(policy.folds).tolist()}
         (tmp / "config.json").write_text(json.dumps(config, indent=2) + "\n")
 
 
@@ -430,7 +422,7 @@ def load(model_dir: Path) -> Policy:
         norm = Normalisation({k[5:]: v for k, v in tensors.items() if k.startswith("norm.")})
         return Policy(net.eval(), norm, config["objects"], np.array(config["classes"]), config["n_classes"],
                       config["arrive_m"], config["still_m"], config["settle_frames"],
-                      None if config.get("folds") is None else np.asarray(config["folds"]), config["sector_radius_m"])
+                      None if config.get("folds") is None else np.asarray(config["folds"]))
     except (SafetensorError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise HspError(f"{model_dir}: not a trained policy of this hsp version (retrain with `hsp train`): {first}") from None
