@@ -143,9 +143,10 @@ class Hierarchy(nn.Module):
              flags: torch.Tensor, tracked: torch.Tensor, progress: torch.Tensor, done: torch.Tensor,
              memory: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The per-object features ``(..., n, F)`` and the context ``(..., D)`` that π_h
-        reads, from raw world poses ``(..., n, 7)`` (of which :func:`upright`), the end-effector in each object's frame,
-        history flags ``(..., n, 3)``, tracked ``(..., n)`` bool, g_t, done fractions and
-        M(h_t); ``codes`` are the objects' one-hot labels ``(n, C)``."""
+        reads, from raw world poses ``(..., n, 7)`` (of which :func:`upright`), the
+        end-effector in each object's frame, history flags ``(..., n, 3)``, tracked
+        ``(..., n)`` bool, g_t, done fractions and M(h_t); ``codes`` are the objects'
+        one-hot labels ``(n, C)``."""
         mean, std = norm.stats["world.mean"][2], norm.stats["world.std"][2]
         pose = upright(world)
         pose = torch.cat([(pose[..., :1] - mean) / std, pose[..., 1:]], -1)  # the cosine as it is
