@@ -39,12 +39,9 @@ def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndar
                   ) -> np.ndarray:
     """π_m's way-point w_t (the heaviest component's mean, physical units, unit quaternion)
     ``(B, 7)`` for the pairs (``tool``, ``target``) ``(B,)`` with p_t[o+, o*] ``current``
-    ``(B, 7)`` and every object's history flags ``(B, n, FLAGS)``. π_m learns every decision
-    seen from the turn of its target that puts the way-point in the canonical sector
-    (:func:`~hsp.policy.features.sector_turns`); it is asked from the turn that puts the
-    tool there (where a way-point follows the tool, a lift, the two coincide; where it does
-    not, a place beside a cube, π_m learnt one answer for every side the tool comes from),
-    and its answer is turned back."""
+    ``(B, 7)`` and every object's history flags ``(B, n, FLAGS)``. π_m is asked, as it
+    learnt every decision, from the turn of its target that puts the tool in the canonical
+    sector (:func:`~hsp.policy.features.sector_turns`), and its answer is turned back."""
     codes = one_hot(np.asarray(policy.classes), policy.n_classes)
     rows = np.arange(len(tool))
     classes = torch.from_numpy(np.concatenate([codes[tool], codes[target]], -1))

@@ -107,7 +107,7 @@ class Policy:
     """A sub-task runs until its tool rests at its way-point: :class:`~hsp.policy.stepper.Stepper`."""
     folds: np.ndarray | None = None
     """Per object, its turns about z that leave it unchanged (0: any; None: none known):
-    π_m sees each decision from the turn of its target that puts the way-point in one
+    π_m sees each decision from the turn of its target that puts the tool in one
     sector (:func:`turned`, :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
 
     def object_folds(self) -> np.ndarray:
@@ -137,15 +137,18 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 def turned(b: dict[str, torch.Tensor], folds: np.ndarray) -> dict[str, torch.Tensor]:
     """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from the turn of
-    each candidate target j that leaves it unchanged and puts the way-point in the
-    canonical sector (``folds`` per object, :func:`~hsp.policy.features.sector_turns`), as
+    each candidate target j that leaves it unchanged and puts the tool in the canonical
+    sector (``folds`` per object, :func:`~hsp.policy.features.sector_turns`), the view π_m
+    is asked from at run time (:func:`~hsp.policy.stepper.pi_m_waypoint`), as
     ``turned_candidate_current`` and ``turned_candidate_waypoint`` beside the rest of ``b``.
-    A cube's four sides are one place, and which of them the demonstrator used depends on
-    how the cube's frame was chosen, which nothing observed tells: seen so, the four
-    become one (a mixture fitted to all four put its mean in the middle of them)."""
+    A cube's four sides are one place (which of them the demonstrator used depends on how
+    the cube's frame was chosen, which nothing observed tells); the label counts as any of
+    them (:func:`candidate_log_probs`). The view is the tool's, not the way-point's: folding
+    the millimetre scatter of places on a target's axis into one sector moved their mean
+    2-3 mm off it, toward the side the tool came from."""
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
-    waypoint = b["candidate_waypoint"].numpy()[real].astype(np.float64)  # (D, n, 7)
-    angle = sector_turns(waypoint, np.broadcast_to(folds, waypoint.shape[:-1]))
+    current = b["candidate_current"].numpy()[real].astype(np.float64)  # (D, n, 7)
+    angle = sector_turns(current, np.broadcast_to(folds, current.shape[:-1]))
 
     def f(x: torch.Tensor) -> torch.Tensor:
         out = x.numpy().copy()
@@ -200,9 +203,17 @@ def candidate_mixtures(policy: Policy, b: dict[str, torch.Tensor], at: tuple[tor
 def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...]
                         ) -> torch.Tensor:
     """log π_m(p_k[o+, j] | o+, j, p_t[o+, j], flags) for every object j as the target, at
-    frames ``at``: ``(D, n)`` (:func:`candidate_mixtures`)."""
-    waypoint = b.get("turned_candidate_waypoint", b["candidate_waypoint"])[at]
-    return mixture_log_prob(candidate_mixtures(policy, b, at), policy.norm("waypoint", waypoint))
+    frames ``at``: ``(D, n)`` (:func:`candidate_mixtures`). The way-point counts as any of
+    its turns by j's symmetry (the same place on j): log Σ over them, so π_m may answer
+    with one side of a cube wherever the demonstrator put the block, and places on its
+    axis, which every turn leaves where they are, are learnt where they are."""
+    waypoint = b.get("turned_candidate_waypoint", b["candidate_waypoint"])[at].numpy().astype(np.float64)
+    angle, valid = views(policy.object_folds())  # (n, S)
+    members = turned_about_z(np.repeat(waypoint[..., None, :], angle.shape[-1], -2), angle)  # (D, n, S, 7)
+    log_weight, mean, log_std = candidate_mixtures(policy, b, at)
+    log_p = mixture_log_prob((log_weight[..., None, :], mean[..., None, :, :], log_std[..., None, :, :]),
+                             policy.norm("waypoint", torch.from_numpy(members.astype(np.float32))))  # (D, n, S)
+    return torch.logsumexp(log_p.masked_fill(~torch.from_numpy(valid), float("-inf")), -1)
 
 
 def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -341,7 +352,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     checkpoint that decides best on them (``decision_subtask_accuracy``, then the smaller
     way-point error) is returned. With
     ``folds`` (each object's turns about z that leave it unchanged), π_m learns every
-    decision seen from the turn of its target that puts the way-point in one sector
+    decision seen from the turn of its target that puts the tool in one sector
     (:func:`turned`). Returns
     the policy and a report: the last losses, and where a checkpoint was chosen, its
     iteration and validation figures."""
