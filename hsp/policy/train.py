@@ -89,6 +89,10 @@ class TrainConfig:
     """... and running, once the tool has been within this of its way-point, or stopped
     short of it, ``settle_frames`` frames in a row (:class:`~hsp.policy.stepper.Stepper`)."""
     settle_frames: int = 3
+    axis_m: float = 0.01
+    """Way-points within this of their target's z axis are on it (a place on top, a grasp,
+    a lift: a hand's scatter there is 2-3 mm; a place beside a block is a block's width
+    out): π_m learns them as seen from the tool, not turned to a side (:func:`turned`)."""
 
 
 @dataclass
@@ -135,28 +139,33 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.where(mask, x, 0.0).sum() / mask.sum().clamp(min=1)
 
 
-def turned(b: dict[str, torch.Tensor], folds: np.ndarray) -> dict[str, torch.Tensor]:
+def turned(b: dict[str, torch.Tensor], folds: np.ndarray, axis_m: float) -> dict[str, torch.Tensor]:
     """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from the turn of
-    each candidate target j that leaves it unchanged and puts the tool in the canonical
-    sector (``folds`` per object, :func:`~hsp.policy.features.sector_turns`), the view π_m
+    each candidate target j that leaves it unchanged (``folds`` per object) and puts the
+    tool in the canonical sector (:func:`~hsp.policy.features.sector_turns`), the view π_m
     is asked from at run time (:func:`~hsp.policy.stepper.pi_m_waypoint`), as
     ``turned_candidate_current`` and ``turned_candidate_waypoint`` beside the rest of ``b``.
-    A cube's four sides are one place (which of them the demonstrator used depends on how
-    the cube's frame was chosen, which nothing observed tells); the label counts as any of
-    them (:func:`candidate_log_probs`). The view is the tool's, not the way-point's: folding
-    the millimetre scatter of places on a target's axis into one sector moved their mean
-    2-3 mm off it, toward the side the tool came from."""
+    A label farther than ``axis_m`` from j's axis is then taken at its own turn in that
+    sector: a cube's four sides are one place, and which of them the demonstrator used
+    depends on how the cube's frame was chosen, which nothing observed tells; learnt so,
+    the place is the side the tool comes from (a mixture fitted to all four put its mean in
+    their middle). A label on the axis is left where the tool's view puts it: folding its
+    millimetre scatter into one sector moved its mean 2-3 mm off the axis."""
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
     current = b["candidate_current"].numpy()[real].astype(np.float64)  # (D, n, 7)
-    angle = sector_turns(current, np.broadcast_to(folds, current.shape[:-1]))
+    tool_view = sector_turns(current, folds)
+    waypoint = turned_about_z(b["candidate_waypoint"].numpy()[real].astype(np.float64), tool_view)
+    off_axis = np.linalg.norm(waypoint[..., :2], axis=-1) > axis_m
+    waypoint = turned_about_z(waypoint, np.where(off_axis, sector_turns(waypoint, folds), 0.0))
+    current = turned_about_z(current, tool_view)
 
-    def f(x: torch.Tensor) -> torch.Tensor:
+    def put(x: torch.Tensor, value: np.ndarray) -> torch.Tensor:
         out = x.numpy().copy()
-        out[real] = turned_about_z(out[real].astype(np.float64), angle)
+        out[real] = value
         return torch.from_numpy(out)
 
-    return b | {"turned_candidate_current": f(b["candidate_current"]),
-                "turned_candidate_waypoint": f(b["candidate_waypoint"])}
+    return b | {"turned_candidate_current": put(b["candidate_current"], current),
+                "turned_candidate_waypoint": put(b["candidate_waypoint"], waypoint)}
 
 
 def forward(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...] | None = None
@@ -203,17 +212,9 @@ def candidate_mixtures(policy: Policy, b: dict[str, torch.Tensor], at: tuple[tor
 def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...]
                         ) -> torch.Tensor:
     """log π_m(p_k[o+, j] | o+, j, p_t[o+, j], flags) for every object j as the target, at
-    frames ``at``: ``(D, n)`` (:func:`candidate_mixtures`). The way-point counts as any of
-    its turns by j's symmetry (the same place on j): log Σ over them, so π_m may answer
-    with one side of a cube wherever the demonstrator put the block, and places on its
-    axis, which every turn leaves where they are, are learnt where they are."""
-    waypoint = b.get("turned_candidate_waypoint", b["candidate_waypoint"])[at].numpy().astype(np.float64)
-    angle, valid = views(policy.object_folds())  # (n, S)
-    members = turned_about_z(np.repeat(waypoint[..., None, :], angle.shape[-1], -2), angle)  # (D, n, S, 7)
-    log_weight, mean, log_std = candidate_mixtures(policy, b, at)
-    log_p = mixture_log_prob((log_weight[..., None, :], mean[..., None, :, :], log_std[..., None, :, :]),
-                             policy.norm("waypoint", torch.from_numpy(members.astype(np.float32))))  # (D, n, S)
-    return torch.logsumexp(log_p.masked_fill(~torch.from_numpy(valid), float("-inf")), -1)
+    frames ``at``: ``(D, n)`` (:func:`candidate_mixtures`)."""
+    waypoint = b.get("turned_candidate_waypoint", b["candidate_waypoint"])[at]
+    return mixture_log_prob(candidate_mixtures(policy, b, at), policy.norm("waypoint", waypoint))
 
 
 def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -375,7 +376,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
         b = batch(episodes, list(order[:take]))
-        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds)))
+        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds), cfg.axis_m))
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()

@@ -114,6 +114,7 @@ def test_a_place_on_any_side_of_a_cube_is_learnt_as_one_side_not_their_middle():
 
 def test_a_place_on_top_of_a_cube_is_learnt_on_its_axis_from_whichever_side_the_tool_comes():
     """Places on top scatter by a hand's 2 mm all round the axis: their mean is on it, and so
-    is π_m's way-point (folding the scatter into one sector of the cube put it 2-3 mm toward
-    the side the tool came from: blocks placed off the tower)."""
-    assert np.linalg.norm(_learnt_places(None), axis=-1).max() < 0.0015
+    is π_m's way-point, within 2.5 mm (32 places: the mean's own error is 0.35 mm per axis;
+    folding the scatter into one sector of the cube put it 3.8 mm toward the side the tool
+    came from, and two blocks so placed end past a tower's 5 mm tolerance)."""
+    assert np.linalg.norm(_learnt_places(None), axis=-1).max() < 0.0025
