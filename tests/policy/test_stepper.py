@@ -74,12 +74,11 @@ def _onto_a_cube(rng: np.random.Generator, side: float | None, H: int = 16) -> n
     world[:, 2, :3] = [0.2, 0.3, 0.0]
     if side is None:
         q = rng.uniform(-np.pi, np.pi)
-        world[:, 0, 5:] = [np.sin(q / 2), np.cos(q / 2)]
         goal = world[0, 1, :3] + np.append(0.002 * rng.standard_normal(2), 0.01)
     else:
         q = rng.integers(4) * np.pi / 2
-        world[:, 0, 5:] = [np.sin(q / 2), np.cos(q / 2)]
         goal = world[0, 1, :3] + side * np.array([np.cos(q), np.sin(q), 0.0])
+    world[:, 0, 5:] = [np.sin(q / 2), np.cos(q / 2)]
     start = world[0, 1, :3] + np.append(0.3 * rng.uniform(-1, 1, 2), 0.2)
     world[:, 0, :3] = np.concatenate([np.linspace(start, goal, 11), np.repeat(goal[None], H - 11, 0)])
     return world
