@@ -8,9 +8,10 @@ ways, each a function of the past tools, targets and way-points (o+_k, o*_k, w_k
 * the LSTM reads, per frame, the semantic labels of o+_{t−1} and o*_{t−1} and w_{t−1}
   (labels rather than object indices, for the same interchangeability);
 * per object, whether it was the previous tool, the previous target, and whether it was
-  the target of a sub-task that has ended (:func:`history_flags`);
-* per semantic label, the fraction of its objects that were such targets (how many nuts
-  are done).
+  the target, or the tool, of a sub-task that has ended (:func:`history_flags`: a block
+  already carried is told from one not yet touched);
+* per semantic label, the fractions of its objects that were such targets and such tools
+  (how many nuts are done).
 
 Poses are ``[x, y, z, qx, qy, qz, qw]`` with canonical orientations of symmetric objects
 (as the labels use). Everything here takes arrays and returns arrays; the closed-loop
@@ -28,8 +29,9 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, rotvec_delta
 from hsp.labeling.priors import relative_poses
 
-FLAGS = 3
-"""Per-object history flags: previous tool, previous target, target of an ended sub-task."""
+FLAGS = 4
+"""Per-object history flags: previous tool, previous target, target of an ended sub-task,
+tool of an ended sub-task."""
 
 
 @dataclass
@@ -44,9 +46,10 @@ class Steps:
     tool_in_object: np.ndarray
     """p_t[o+_t, j]: the labelled tool in each object's frame ``(H, n, 7)`` (π_h's target head)."""
     flags: np.ndarray
-    """Per-object history flags ``(H, n, 3)`` (:func:`history_flags`)."""
+    """Per-object history flags ``(H, n, FLAGS)`` (:func:`history_flags`)."""
     done: np.ndarray
-    """Per semantic label, the fraction of its objects that were targets of ended sub-tasks ``(H, C)``."""
+    """Per semantic label, the fractions of its objects that were targets, and tools, of
+    ended sub-tasks ``(H, 2C)``."""
     history: np.ndarray
     """What the LSTM reads at t: labels of o+_{t−1} and o*_{t−1} (one-hot each) and w_{t−1} ``(H, 2C + 7)``."""
     progress: np.ndarray
@@ -110,7 +113,8 @@ def way_length(step: np.ndarray) -> np.ndarray:
 def history_flags(tool: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
     """Per frame t and object j, from the tools and targets before t ``(H,)`` each: j was
     o+_{t−1}; j was o*_{t−1}; j was the target of a sub-task (a run of one pair) that
-    ended before t. ``(H, n, 3)`` float32, zero at t = 0."""
+    ended before t; j was the tool of one (an object carried or used; the end-effector, the
+    tool of most sub-tasks, is not flagged). ``(H, n, FLAGS)`` float32, zero at t = 0."""
     H = len(tool)
     out = np.zeros((H, n, FLAGS), np.float32)
     if H < 2:
@@ -120,17 +124,20 @@ def history_flags(tool: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
     out[t, target[:-1], 1] = 1.0
     switch = np.flatnonzero((tool[1:] != tool[:-1]) | (target[1:] != target[:-1])) + 1  # pair at s differs from s−1
     switch = switch[switch + 1 < H]  # the history shows the new pair from t = s + 1 on
-    ended = np.zeros((H, n), np.float32)
-    ended[switch + 1, target[switch - 1]] = 1.0
-    out[:, :, 2] = np.maximum.accumulate(ended, axis=0)
+    ended = np.zeros((H, n, 2), np.float32)
+    ended[switch + 1, target[switch - 1], 0] = 1.0
+    ended[switch + 1, tool[switch - 1], 1] = 1.0
+    ended[:, 0, 1] = 0.0
+    out[:, :, 2:] = np.maximum.accumulate(ended, axis=0)
     return out
 
 
 def done_fractions(flags: np.ndarray, classes: np.ndarray, n_classes: int) -> np.ndarray:
-    """Per frame and semantic label, the fraction of its objects flagged as targets of
-    ended sub-tasks ``(H, C)``."""
+    """Per frame and semantic label, the fractions of its objects flagged as targets, then
+    as tools, of ended sub-tasks ``(..., 2C)`` from flags ``(..., n, FLAGS)``."""
     members = one_hot(classes, n_classes)  # (n, C)
-    return (flags[..., 2] @ members) / np.maximum(members.sum(0), 1.0)
+    share = members / np.maximum(members.sum(0), 1.0)
+    return np.concatenate([flags[..., 2] @ share, flags[..., 3] @ share], -1).astype(np.float32)
 
 
 def memory_input(tool: np.ndarray, target: np.ndarray, waypoint: np.ndarray, classes: np.ndarray,
@@ -249,15 +256,75 @@ CONTINUOUS_VIEWS = 8
 many steps of a revolution."""
 
 
+def _into_sector(angle: np.ndarray, folds: np.ndarray) -> np.ndarray:
+    """The turn (rad), among those that leave a target unchanged (``folds`` per entry,
+    broadcast against ``angle``; 0: any turn), that brings ``angle`` within ±π/folds of
+    zero (a continuous symmetry: onto it)."""
+    k = np.broadcast_to(np.asarray(folds), np.shape(angle))
+    step = 2 * np.pi / np.maximum(k, 1)
+    return np.where(k == 0, -angle, np.where(k == 1, 0.0, -np.round(angle / step) * step))
+
+
 def sector_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:
     """The turn (rad) about a target's z axis, among those that leave it unchanged
     (``folds`` per entry, broadcast against ``poses``' leading axes; 0: any turn), that
     brings the position of ``poses`` ``(..., 7)`` in its frame into the canonical sector:
     within ±π/folds of the x axis (a continuous symmetry: onto it)."""
-    phi = np.arctan2(poses[..., 1], poses[..., 0])
-    k = np.broadcast_to(np.asarray(folds), phi.shape)
-    step = 2 * np.pi / np.maximum(k, 1)
-    return np.where(k == 0, -phi, np.where(k == 1, 0.0, -np.round(phi / step) * step))
+    return _into_sector(np.arctan2(poses[..., 1], poses[..., 0]), folds)
+
+
+def heading(poses: np.ndarray) -> np.ndarray:
+    """The heading (rad) of poses ``(..., 7)``: the angle of their x axis about z."""
+    x, y, z, w = np.moveaxis(poses[..., 3:], -1, 0)
+    return np.arctan2(2 * (x * y + z * w), 1 - 2 * (y * y + z * z))
+
+
+def heading_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:
+    """As :func:`sector_turns`, for the heading of ``poses`` rather than their position: the
+    turn of a target that makes a tool's heading in its frame canonical. A hand above a
+    cube, fingers at 30°, is the hand at 120° (a quarter turn of the cube): seen from the
+    turn that brings its heading within ±45°, every grasp from above is the same."""
+    return _into_sector(heading(poses), folds)
+
+
+def seen_by_pi_m(poses: np.ndarray, folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tool poses in their targets' frames ``(..., 7)`` as π_m reads them and answers: the
+    position from the turn of the target that brings it into the canonical sector
+    (:func:`sector_turns`: a place beside a cube is one side, the side the tool comes
+    from), the orientation from the turn that makes the tool's heading canonical
+    (:func:`heading_turns`: a grasp from above is one heading). Returns the view and the
+    two turns ``(..., 2)``; :func:`in_view` with the turns negated turns an answer back."""
+    turns = np.stack([sector_turns(poses, folds), heading_turns(poses, folds)], -1)
+    return in_view(poses, turns), turns
+
+
+def in_view(poses: np.ndarray, turns: np.ndarray) -> np.ndarray:
+    """Poses ``(..., 7)`` in a target's frame with their position turned about its z axis by
+    ``turns[..., 0]`` and their orientation by ``turns[..., 1]`` (both turns leave the
+    target unchanged, so each part stays what it was)."""
+    position = turned_about_z(poses, turns[..., 0])[..., :3]
+    return np.concatenate([position, turned_about_z(poses, turns[..., 1])[..., 3:]], -1)
+
+
+def nearest_symmetric(poses: np.ndarray, reference: np.ndarray, folds: np.ndarray) -> np.ndarray:
+    """``poses`` ``(..., 7)`` of an object turned about its own z axis by the turn that
+    leaves it unchanged (``folds`` per entry; 0: any) and brings its orientation nearest
+    to ``reference``'s ``(..., 7)``: the same pose, reached from ``reference`` by the
+    least rotation (a cube put down after a quarter turn in the hand is the same cube),
+    its quaternion of the reference's sign."""
+    shape = poses.shape
+    p, r = poses.reshape(-1, 7), reference.reshape(-1, 7)
+    folds = np.broadcast_to(np.asarray(folds), shape[:-1]).reshape(-1)
+    out = p.copy()
+    ok = (np.linalg.norm(p[:, 3:], axis=1) > 0) & (np.linalg.norm(r[:, 3:], axis=1) > 0)  # a lost pose: as it is
+    if ok.any():
+        R = Rotation.from_quat(p[ok, 3:])
+        D = Rotation.from_quat(r[ok, 3:]).inv().as_matrix() @ R.as_matrix()  # R_ref⁻¹ R: what remains to turn
+        best = np.arctan2(D[:, 0, 1] - D[:, 1, 0], D[:, 0, 0] + D[:, 1, 1])  # the turn about z undoing most of it
+        turn = -_into_sector(best, folds[ok])  # the allowed turn nearest it
+        q = (R * Rotation.from_euler("z", turn[:, None])).as_quat()
+        out[ok, 3:] = q * np.where(np.sum(q * r[ok, 3:], -1) < 0, -1.0, 1.0)[:, None]  # the reference's sign
+    return out.reshape(shape)
 
 
 def views(folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

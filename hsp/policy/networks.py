@@ -112,8 +112,8 @@ class Sizes:
 
     @property
     def context(self) -> int:
-        """e_t (upright), M(h_t), embedded g_t, done fractions."""
-        return UPRIGHT + self.memory + self.hidden + self.classes
+        """e_t (upright), M(h_t), embedded g_t, done fractions (as targets, as tools)."""
+        return UPRIGHT + self.memory + self.hidden + 2 * self.classes
 
 
 class Hierarchy(nn.Module):

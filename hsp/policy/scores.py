@@ -52,7 +52,7 @@ class PolicyScores:
             pair_scores = log_tool[:, pairs[:, 0]] + log_target[:, pairs[:, 0], pairs[:, 1]]  # (H, P)
             self._unary = np.where(steps.decision[:, None], pair_scores, np.float32(-np.log(self.P)))
             self._decision = steps.decision
-            flags = b["flags"][0]  # (H, n, 3)
+            flags = b["flags"][0]  # (H, n, FLAGS)
             i, j = torch.from_numpy(pairs[:, 0]), torch.from_numpy(pairs[:, 1])
             pair_classes = torch.cat([codes[i], codes[j]], -1).expand(self.H, -1, -1)
             pair_flags = torch.cat([flags[:, i], flags[:, j]], -1)

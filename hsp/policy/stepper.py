@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hsp.policy.features import FLAGS, one_hot, remaining_way, sector_turns, turned_about_z, way_length
+from hsp.policy.features import FLAGS, done_fractions, in_view, one_hot, remaining_way, seen_by_pi_m, way_length
 from hsp.geometry import normalize_quat, relative
 from hsp.policy.networks import mixture_mode
 
@@ -40,17 +40,18 @@ def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndar
     """π_m's way-point w_t (the heaviest component's mean, physical units, unit quaternion)
     ``(B, 7)`` for the pairs (``tool``, ``target``) ``(B,)`` with p_t[o+, o*] ``current``
     ``(B, 7)`` and every object's history flags ``(B, n, FLAGS)``. π_m is asked, as it
-    learnt every decision, from the turn of its target that puts the tool in the canonical
-    sector (:func:`~hsp.policy.features.sector_turns`), and its answer is turned back."""
+    learnt every decision, from the turns of its target that make the tool's position and
+    its heading canonical (:func:`~hsp.policy.features.seen_by_pi_m`), and its answer is
+    turned back."""
     codes = one_hot(np.asarray(policy.classes), policy.n_classes)
     rows = np.arange(len(tool))
     classes = torch.from_numpy(np.concatenate([codes[tool], codes[target]], -1))
     pair_flags = torch.from_numpy(np.concatenate([flags[rows, tool], flags[rows, target]], -1))
     norm, net = policy.norm, policy.net
-    angle = sector_turns(np.asarray(current, np.float64), policy.object_folds()[target])
-    x = torch.from_numpy(turned_about_z(np.asarray(current, np.float64), angle).astype(np.float32))
+    seen, turns = seen_by_pi_m(np.asarray(current, np.float64), policy.object_folds()[target])
+    x = torch.from_numpy(seen.astype(np.float32))
     w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), pair_flags, norm("waypoint", x))))
-    w = turned_about_z(w.numpy().astype(np.float64), -angle)
+    w = in_view(w.numpy().astype(np.float64), -turns)
     return np.concatenate([w[..., :3], normalize_quat(w[..., 3:])], -1).astype(np.float32)
 
 
@@ -87,18 +88,17 @@ class Stepper:
         self.n = len(self.classes)
         self.B = batch
         self.class_codes = one_hot(self.classes, self.C)  # (n, C)
-        self.members = np.maximum(self.class_codes.sum(0), 1.0)
         self.state: tuple[torch.Tensor, torch.Tensor] | None = None
         self.prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # tool, target, w at t − 1
         self.prev2_pair: tuple[np.ndarray, np.ndarray] | None = None  # tool, target at t − 2
-        self.ended = np.zeros((batch, self.n), np.float32)
+        self.ended = np.zeros((batch, self.n, 2), np.float32)  # target, tool of an ended sub-task
         self.rested = np.zeros(batch, np.int64)  # frames in a row the tool has been at rest at its way-point
         self.prev_current: np.ndarray | None = None  # p_{t−1}[o+_{t−1}, o*_{t−1}]
         self.remaining = np.zeros(batch)  # length of the way from the tool to w_{t−1} at t − 1
         self.shrink = 1.0 - 0.5 * policy.net.sizes.min_fraction  # less progress than this: stopped
 
     def _history(self, world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """LSTM input ``(B, 2C + 7)``, g_t ``(B, 7)`` and flags ``(B, n, 3)`` at this frame."""
+        """LSTM input ``(B, 2C + 7)``, g_t ``(B, 7)`` and flags ``(B, n, FLAGS)`` at this frame."""
         B, n, C = self.B, self.n, self.C
         x = np.zeros((B, 2 * C + 7), np.float32)
         g = np.zeros((B, 7), np.float32)
@@ -114,8 +114,10 @@ class Stepper:
             flags[rows, target, 1] = 1.0
             if self.prev2_pair is not None:
                 switched = (self.prev2_pair[0] != tool) | (self.prev2_pair[1] != target)
-                self.ended[rows[switched], self.prev2_pair[1][switched]] = 1.0
-        flags[..., 2] = self.ended
+                self.ended[rows[switched], self.prev2_pair[1][switched], 0] = 1.0
+                self.ended[rows[switched], self.prev2_pair[0][switched], 1] = 1.0
+                self.ended[:, 0, 1] = 0.0  # the end-effector is not flagged as a tool
+        flags[..., 2:] = self.ended
         return x, g, flags
 
     def _kept(self, i: int) -> np.ndarray:
@@ -152,7 +154,7 @@ class Stepper:
         tracked = np.ones((B, n), bool) if tracked is None else tracked
         x, g, flags = self._history(world)
         ee_in = relative(np.repeat(world[:, :1], n, 1), world).astype(np.float32)  # p_t[0, j]
-        done = ((flags[..., 2] @ self.class_codes) / self.members).astype(np.float32)
+        done = done_fractions(flags, self.classes, self.C)
         net, norm = self.net, self.norm
         f = torch.from_numpy
         rows = np.arange(B)

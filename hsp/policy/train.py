@@ -44,14 +44,15 @@ from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
-from hsp.policy.features import STEP_FIELDS, Steps, one_hot, sector_turns, turned_about_z, views
+from hsp.policy.features import (STEP_FIELDS, Steps, in_view, nearest_symmetric, one_hot, sector_turns, seen_by_pi_m,
+                                 turned_about_z, views)
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob
 from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper, pi_m_waypoint
 
 log = logging.getLogger(__name__)
 
-FORMAT = 5
+FORMAT = 6
 """Layout of saved models; older ones are refused with a clear message."""
 WAYPOINT_HIT_M = 0.02
 """A way-point agrees with the label when within this (m)."""
@@ -111,8 +112,8 @@ class Policy:
     """A sub-task runs until its tool rests at its way-point: :class:`~hsp.policy.stepper.Stepper`."""
     folds: np.ndarray | None = None
     """Per object, its turns about z that leave it unchanged (0: any; None: none known):
-    π_m sees each decision from the turn of its target that puts the tool in one
-    sector (:func:`turned`, :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
+    π_m sees each decision from one turn of its target (:func:`turned`,
+    :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
 
     def object_folds(self) -> np.ndarray:
         """:attr:`folds`, or 1 (no turn but none) for every object when none is known."""
@@ -140,24 +141,31 @@ def _mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 def turned(b: dict[str, torch.Tensor], folds: np.ndarray, axis_m: float) -> dict[str, torch.Tensor]:
-    """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen from the turn of
-    each candidate target j that leaves it unchanged (``folds`` per object) and puts the
-    tool in the canonical sector (:func:`~hsp.policy.features.sector_turns`), the view π_m
-    is asked from at run time (:func:`~hsp.policy.stepper.pi_m_waypoint`), as
-    ``turned_candidate_current`` and ``turned_candidate_waypoint`` beside the rest of ``b``.
-    A label farther than ``axis_m`` from j's axis is then taken at its own turn in that
-    sector: a cube's four sides are one place, and which of them the demonstrator used
-    depends on how the cube's frame was chosen, which nothing observed tells; learnt so,
-    the place is the side the tool comes from (a mixture fitted to all four put its mean in
-    their middle). A label on the axis is left where the tool's view puts it: folding its
-    millimetre scatter into one sector moved its mean 2-3 mm off the axis."""
+    """π_m's inputs p_t[o+, j] and labels p_k[o+, j] of batch ``b`` seen, for each candidate
+    target j (``folds`` per object), as π_m is asked at run time
+    (:func:`~hsp.policy.features.seen_by_pi_m`, :func:`~hsp.policy.stepper.pi_m_waypoint`):
+    positions from the turn of j that puts the tool's position in one sector, orientations
+    from the turn that puts its heading there; as ``turned_candidate_current`` and
+    ``turned_candidate_waypoint`` beside the rest of ``b``.
+
+    A label's position farther than ``axis_m`` from j's axis is then taken at its own turn
+    into that sector: a cube's four sides are one place, and which of them the demonstrator
+    used depends on how the cube's frame was chosen, which nothing observed tells; learnt
+    so, the place is the side the tool comes from (a mixture fitted to all four put its
+    mean in their middle). A position on the axis is left where the tool's view puts it:
+    folding its millimetre scatter into one sector moved its mean 2-3 mm off the axis. The
+    heading of a grasp is the hand's own rounded to the cube's symmetry: seen from the turn
+    that puts the hand's heading within ±45°, it is one answer, 0° (seen with the position,
+    a staircase of what π_m reads, learnt 15-40° off; the fingers missed the faces and the
+    block slipped). Last, a label's orientation is taken at the turn of the tool's own
+    symmetry nearest the tool's present one (a hand's fingers at 0° and at 180° are one
+    grasp)."""
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
-    current = b["candidate_current"].numpy()[real].astype(np.float64)  # (D, n, 7)
-    tool_view = sector_turns(current, folds)
-    waypoint = turned_about_z(b["candidate_waypoint"].numpy()[real].astype(np.float64), tool_view)
+    current, turns = seen_by_pi_m(b["candidate_current"].numpy()[real].astype(np.float64), folds)  # (D, n, 7)
+    waypoint = in_view(b["candidate_waypoint"].numpy()[real].astype(np.float64), turns)
     off_axis = np.linalg.norm(waypoint[..., :2], axis=-1) > axis_m
-    waypoint = turned_about_z(waypoint, np.where(off_axis, sector_turns(waypoint, folds), 0.0))
-    current = turned_about_z(current, tool_view)
+    waypoint[..., :3] = turned_about_z(waypoint, np.where(off_axis, sector_turns(waypoint, folds), 0.0))[..., :3]
+    waypoint = nearest_symmetric(waypoint, current, folds[b["tool"].numpy()[real]][:, None])
 
     def put(x: torch.Tensor, value: np.ndarray) -> torch.Tensor:
         out = x.numpy().copy()
@@ -202,7 +210,7 @@ def candidate_mixtures(policy: Policy, b: dict[str, torch.Tensor], at: tuple[tor
     net, norm = policy.net, policy.norm
     codes = torch.from_numpy(one_hot(np.asarray(policy.classes), policy.n_classes))  # (n, C)
     current = b.get("turned_candidate_current", b["candidate_current"])[at]  # (D, n, 7)
-    tool, flags = b["tool"][at], b["flags"][at]  # (D,), (D, n, 3)
+    tool, flags = b["tool"][at], b["flags"][at]  # (D,), (D, n, FLAGS)
     D, n = current.shape[:2]
     pair_classes = torch.cat([codes[tool][:, None].expand(D, n, -1), codes.expand(D, n, -1)], -1)
     tool_flags = flags.gather(1, tool[:, None, None].expand(D, 1, flags.shape[-1])).expand(D, n, -1)
@@ -292,6 +300,20 @@ def waypoint_distance(policy: Policy, w: np.ndarray, label: np.ndarray, target: 
     return np.where(valid, np.linalg.norm(members[..., :3] - w[..., None, :3], axis=-1), np.inf).min(-1)
 
 
+def waypoint_turn(policy: Policy, w: np.ndarray, label: np.ndarray, tool: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Angle (degrees) between the orientations of way-points ``w`` and ``label`` (both
+    ``(..., 7)``), the least over the turns of ``target`` ``(...)`` and of ``tool``
+    ``(...)`` that leave them unchanged: the same grasp or place of symmetric objects."""
+    folds = policy.object_folds()
+    angle, valid = views(folds[target])
+    members = turned_about_z(np.repeat(label[..., None, :].astype(np.float64), angle.shape[-1], -2), angle)
+    w = np.broadcast_to(w[..., None, :].astype(np.float64), members.shape)
+    members = nearest_symmetric(members, w, folds[tool][..., None])
+    cos = np.abs(np.sum(members[..., 3:] * w[..., 3:], -1)) / (np.linalg.norm(members[..., 3:], axis=-1)
+                                                              * np.linalg.norm(w[..., 3:], axis=-1))
+    return np.where(valid, np.degrees(2 * np.arccos(np.clip(cos, 0.0, 1.0))), np.inf).min(-1)
+
+
 def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     """On ``episodes`` (a target counts as right when it is in the label's equivalence set,
     the way-point then compared with the label's in its frame): π_h's pair accuracy running free over the labelled frames, beside
@@ -322,6 +344,7 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     tf_tool = out["log_tool"].argmax(-1).numpy()  # at the decisions
     tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
     tf_w_err = waypoint_distance(policy, tf_w, w[decided], target[decided])  # at the decisions, in their order
+    tf_w_turn = waypoint_turn(policy, tf_w, w[decided], tool[decided], target[decided])
     tf_right = (tf_tool == tool[decided]) & np.take_along_axis(members[decided], tf_target[:, None], -1)[:, 0]
     free = free_run(policy, episodes)
     free_pair = (free["tool"] == tool) & member(free["target"])
@@ -342,6 +365,7 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
         "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
         "waypoint_error_mm_free": mm(free_w_err[labelled & free_pair]),
         "waypoint_error_mm_teacher_forced": mm(tf_w_err),
+        "waypoint_turn_deg_teacher_forced": float(np.median(tf_w_turn)) if tf_w_turn.size else float("nan"),
         "action_error_mm": mm(a_err[acted]),
     }
 
@@ -387,9 +411,9 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
             net.eval()
             figures = validate(policy, held_out)
             net.train()
-            log.info("iteration %d: held out, decisions right %.3f (way-point %.1f mm); running free, pair %.3f", it,
-                     figures["decision_subtask_accuracy"], figures["waypoint_error_mm_teacher_forced"],
-                     figures["pair_accuracy_free"])
+            log.info("iteration %d: held out, decisions right %.3f (way-point %.1f mm, %.1f°); running free, pair %.3f",
+                     it, figures["decision_subtask_accuracy"], figures["waypoint_error_mm_teacher_forced"],
+                     figures["waypoint_turn_deg_teacher_forced"], figures["pair_accuracy_free"])
             # decisions right first; among equals (a few held-out episodes saturate), the more
             # precise way-points (a block is placed within 5 mm)
             score = (float(np.nan_to_num(figures["decision_subtask_accuracy"], nan=-1.0)),

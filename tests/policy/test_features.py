@@ -7,7 +7,8 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, relative
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import episode_steps, history_flags, sector_turns, turned_about_z
+from hsp.policy.features import (episode_steps, heading, history_flags, in_view, nearest_symmetric, sector_turns, seen_by_pi_m,
+                                 turned_about_z)
 from tests.labeling.test_em import _episode
 
 CLASSES = np.array([0, 1, 1])
@@ -46,13 +47,16 @@ def test_waypoint_current_and_action_come_from_the_labelled_pair():
     assert s.labelled.all() and s.acted[:-1].all() and not s.acted[-1]
 
 
-def test_flags_mark_targets_of_ended_sub_tasks_from_the_frame_after_the_switch_shows():
+def test_flags_mark_targets_and_tools_of_ended_sub_tasks_from_the_frame_after_the_switch_shows():
     tool = np.array([0, 0, 0, 1, 1, 0, 0])
     target = np.array([1, 1, 1, 2, 2, 2, 2])
     f = history_flags(tool, target, 3)
     # the pair changes at frame 3 (target 1 ended) and at 5 (target 2 ended: (1, 2) → (0, 2))
     np.testing.assert_array_equal(f[:, :, 2], [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 1, 0], [0, 1, 0],
                                                [0, 1, 1]])
+    # tools of ended sub-tasks: object 1 from frame 6 (the end-effector is never flagged)
+    np.testing.assert_array_equal(f[:, :, 3], [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0],
+                                               [0, 1, 0]])
     np.testing.assert_array_equal(f[1:, :, 0].argmax(1), tool[:-1])
 
 
@@ -122,3 +126,35 @@ def test_the_sector_turn_brings_a_way_point_within_half_a_fold_of_the_x_axis():
     any_turn = turned_about_z(w, sector_turns(w, np.zeros(4, int)))
     np.testing.assert_allclose(any_turn[:, 1], 0.0, atol=1e-12)
     assert (any_turn[:, 0] > 0).all()
+
+
+def _yawed(yaw_deg: float, xyz=(0.0, 0.0, 0.0), tilt_deg: float = 0.0) -> np.ndarray:
+    r = Rotation.from_euler("z", yaw_deg, degrees=True) * Rotation.from_euler("x", tilt_deg, degrees=True)
+    return np.r_[xyz, r.as_quat()]
+
+
+def test_the_nearest_symmetric_pose_turns_an_object_about_its_own_axis_by_its_symmetry_only():
+    """A cube at 85° seen from a hand at 10° is the cube at −5°; a two-fold object at 85°
+    stays (265° is farther); a round one takes the reference's heading; a tilted one keeps
+    its tilt; the position never changes."""
+    ref = np.stack([_yawed(10), _yawed(10), _yawed(100), _yawed(-170, tilt_deg=5)])
+    poses = np.stack([_yawed(85, (0.1, 0.2, 0.3)), _yawed(85), _yawed(0), _yawed(95, tilt_deg=3)])
+    got = nearest_symmetric(poses, ref, np.array([4, 2, 0, 2]))
+    np.testing.assert_allclose(np.degrees(heading(got)), [-5, 85, 100, -85], atol=1e-6)
+    np.testing.assert_allclose(got[:, :3], poses[:, :3])
+    z_axis = Rotation.from_quat(got[3:, 3:]).apply([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(np.degrees(np.arccos(z_axis[:, 2])), [3.0], atol=1e-6)
+
+
+def test_pi_m_reads_a_tools_position_from_its_direction_and_its_orientation_from_its_heading():
+    """A hand 5 cm from a cube's axis in the direction 130°, heading −70°, is read at 40°
+    (a quarter turn back) and heading 20° (a quarter turn on); turning the answer back by
+    the same turns gives the pose again."""
+    pose = _yawed(-70, (0.05 * np.cos(np.radians(130)), 0.05 * np.sin(np.radians(130)), 0.08))
+    seen, turns = seen_by_pi_m(pose[None], np.array([4]))
+    np.testing.assert_allclose(np.degrees(turns), [[-90, 90]], atol=1e-9)
+    np.testing.assert_allclose(np.degrees(np.arctan2(seen[0, 1], seen[0, 0])), 40, atol=1e-6)
+    np.testing.assert_allclose(np.degrees(heading(seen)), [20], atol=1e-6)
+    back = in_view(seen, -turns)
+    np.testing.assert_allclose(back[0, :3], pose[:3], atol=1e-12)
+    np.testing.assert_allclose(abs(np.dot(back[0, 3:], pose[3:])), 1.0, atol=1e-12)

@@ -5,6 +5,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, relative
+from hsp.policy.features import FLAGS
 from hsp.policy.networks import Hierarchy, Sizes, upright
 from hsp.policy.normalisation import Normalisation
 from tests.policy.test_features import _steps
@@ -29,8 +30,8 @@ def test_pi_h_reads_the_same_scene_wherever_it_lies_and_however_it_is_turned_on_
     def read(world: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         ee_in = relative(np.repeat(world[:1], len(world), 0), world)
         f = lambda x: torch.as_tensor(np.asarray(x, np.float32))  # noqa: E731
-        return net.read(norm, codes, f(world), f(ee_in), torch.zeros(3, 3), torch.ones(3, dtype=torch.bool),
-                        torch.zeros(7), torch.zeros(2), torch.zeros(net.sizes.memory))
+        return net.read(norm, codes, f(world), f(ee_in), torch.zeros(3, FLAGS), torch.ones(3, dtype=torch.bool),
+                        torch.zeros(7), torch.zeros(4), torch.zeros(net.sizes.memory))
 
     world = _scene(rng)
     move = np.r_[0.2, -0.1, 0.0, Rotation.from_euler("z", 1.1).as_quat()]

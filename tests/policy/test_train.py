@@ -162,7 +162,8 @@ def test_among_equally_right_checkpoints_the_more_precise_one_is_kept(monkeypatc
 
     def fake_validate(policy, episodes):
         right, mm = next(scripted)
-        return {"decision_subtask_accuracy": right, "waypoint_error_mm_teacher_forced": mm, "pair_accuracy_free": 0.0}
+        return {"decision_subtask_accuracy": right, "waypoint_error_mm_teacher_forced": mm,
+                "waypoint_turn_deg_teacher_forced": 0.0, "pair_accuracy_free": 0.0}
 
     monkeypatch.setattr(train_module, "validate", fake_validate)
     _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20),
