@@ -7,9 +7,9 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
   :mod:`~hsp.labeling.equivalence`: L_o* + L_w is then the set's joint likelihood, so the
   member whose frame explains the way-point best is learnt);
 * L_w: −log π_m(w_t), a mixture of Gaussians in standardised units (not the paper's squared
-  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from the turn
-  of a symmetric target that puts w_t in one sector (a cube's four sides are one place,
-  :func:`turned`);
+  error: :mod:`~hsp.policy.networks` says why), with p_t[o+, o*] and w_t seen from the turns
+  of a symmetric target that put the tool's position, and its heading, in one sector (a
+  cube's four sides are one place, a grasp from above one heading: :func:`turned`);
 * all three on the decision frames only (the paper sums L_o+ and L_o* over every frame),
   where a sub-task has ended and the next tool, target and way-point are chosen: a
   sub-task runs until its tool comes to rest (:class:`~hsp.policy.stepper.Stepper`), so
@@ -112,7 +112,7 @@ class Policy:
     """A sub-task runs until its tool rests at its way-point: :class:`~hsp.policy.stepper.Stepper`."""
     folds: np.ndarray | None = None
     """Per object, its turns about z that leave it unchanged (0: any; None: none known):
-    π_m sees each decision from one turn of its target (:func:`turned`,
+    π_m sees each decision from turns of its target (:func:`turned`,
     :func:`~hsp.policy.stepper.pi_m_waypoint`)."""
 
     def object_folds(self) -> np.ndarray:
@@ -377,8 +377,8 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     checkpoint that decides best on them (``decision_subtask_accuracy``, then the smaller
     way-point error) is returned. With
     ``folds`` (each object's turns about z that leave it unchanged), π_m learns every
-    decision seen from the turn of its target that puts the tool in one sector
-    (:func:`turned`). Returns
+    decision seen from the turns of its target that put the tool's position and heading
+    in one sector (:func:`turned`). Returns
     the policy and a report: the last losses, and where a checkpoint was chosen, its
     iteration and validation figures."""
     if not episodes:
