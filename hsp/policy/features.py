@@ -26,7 +26,7 @@ import numpy as np
 
 from scipy.spatial.transform import Rotation
 
-from hsp.geometry import compose, rotvec_delta
+from hsp.geometry import compose, rotvec_delta, yaw_of
 from hsp.labeling.priors import relative_poses
 
 FLAGS = 4
@@ -273,18 +273,12 @@ def sector_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:
     return _into_sector(np.arctan2(poses[..., 1], poses[..., 0]), folds)
 
 
-def heading(poses: np.ndarray) -> np.ndarray:
-    """The heading (rad) of poses ``(..., 7)``: the angle of their x axis about z."""
-    x, y, z, w = np.moveaxis(poses[..., 3:], -1, 0)
-    return np.arctan2(2 * (x * y + z * w), 1 - 2 * (y * y + z * z))
-
-
 def heading_turns(poses: np.ndarray, folds: np.ndarray) -> np.ndarray:
     """As :func:`sector_turns`, for the heading of ``poses`` rather than their position: the
     turn of a target that makes a tool's heading in its frame canonical. A hand above a
     cube, fingers at 30°, is the hand at 120° (a quarter turn of the cube): seen from the
     turn that brings its heading within ±45°, every grasp from above is the same."""
-    return _into_sector(heading(poses), folds)
+    return _into_sector(yaw_of(poses[..., 3:]), folds)
 
 
 def seen_by_pi_m(poses: np.ndarray, folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

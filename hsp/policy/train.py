@@ -44,6 +44,7 @@ from safetensors.torch import load_file, save_file
 
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
+from hsp.geometry import rotation_angle_deg
 from hsp.policy.features import (STEP_FIELDS, Steps, in_view, nearest_symmetric, one_hot, sector_turns, seen_by_pi_m,
                                  turned_about_z, views)
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob
@@ -292,11 +293,17 @@ def free_run(policy: Policy, episodes: list[Steps]) -> dict[str, np.ndarray]:
     return {"tool": tool, "target": target, "waypoint": waypoint}
 
 
+def _label_turns(policy: Policy, label: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every turn of way-points ``label`` ``(..., 7)`` by the symmetry of ``target`` ``(...)``
+    ``(..., S, 7)``, and which of them are the target's ``(..., S)``."""
+    angle, valid = views(policy.object_folds()[target])
+    return turned_about_z(np.repeat(label[..., None, :].astype(np.float64), angle.shape[-1], -2), angle), valid
+
+
 def waypoint_distance(policy: Policy, w: np.ndarray, label: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Distance (m) of way-points ``w`` from the nearest turn of ``label`` (both ``(..., 7)``)
     by the symmetry of ``target`` ``(...)``: the same place on a symmetric target."""
-    angle, valid = views(policy.object_folds()[target])
-    members = turned_about_z(np.repeat(label[..., None, :].astype(np.float64), angle.shape[-1], -2), angle)
+    members, valid = _label_turns(policy, label, target)
     return np.where(valid, np.linalg.norm(members[..., :3] - w[..., None, :3], axis=-1), np.inf).min(-1)
 
 
@@ -304,14 +311,10 @@ def waypoint_turn(policy: Policy, w: np.ndarray, label: np.ndarray, tool: np.nda
     """Angle (degrees) between the orientations of way-points ``w`` and ``label`` (both
     ``(..., 7)``), the least over the turns of ``target`` ``(...)`` and of ``tool``
     ``(...)`` that leave them unchanged: the same grasp or place of symmetric objects."""
-    folds = policy.object_folds()
-    angle, valid = views(folds[target])
-    members = turned_about_z(np.repeat(label[..., None, :].astype(np.float64), angle.shape[-1], -2), angle)
+    members, valid = _label_turns(policy, label, target)
     w = np.broadcast_to(w[..., None, :].astype(np.float64), members.shape)
-    members = nearest_symmetric(members, w, folds[tool][..., None])
-    cos = np.abs(np.sum(members[..., 3:] * w[..., 3:], -1)) / (np.linalg.norm(members[..., 3:], axis=-1)
-                                                              * np.linalg.norm(w[..., 3:], axis=-1))
-    return np.where(valid, np.degrees(2 * np.arccos(np.clip(cos, 0.0, 1.0))), np.inf).min(-1)
+    members = nearest_symmetric(members, w, policy.object_folds()[tool][..., None])
+    return np.where(valid, rotation_angle_deg(members[..., 3:], w[..., 3:]), np.inf).min(-1)
 
 
 def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:

@@ -4,10 +4,10 @@ import numpy as np
 
 from scipy.spatial.transform import Rotation
 
-from hsp.geometry import compose, relative
+from hsp.geometry import compose, relative, yaw_of
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import (episode_steps, heading, history_flags, in_view, nearest_symmetric, sector_turns, seen_by_pi_m,
+from hsp.policy.features import (episode_steps, history_flags, in_view, nearest_symmetric, sector_turns, seen_by_pi_m,
                                  turned_about_z)
 from tests.labeling.test_em import _episode
 
@@ -140,7 +140,7 @@ def test_the_nearest_symmetric_pose_turns_an_object_about_its_own_axis_by_its_sy
     ref = np.stack([_yawed(10), _yawed(10), _yawed(100), _yawed(-170, tilt_deg=5)])
     poses = np.stack([_yawed(85, (0.1, 0.2, 0.3)), _yawed(85), _yawed(0), _yawed(95, tilt_deg=3)])
     got = nearest_symmetric(poses, ref, np.array([4, 2, 0, 2]))
-    np.testing.assert_allclose(np.degrees(heading(got)), [-5, 85, 100, -85], atol=1e-6)
+    np.testing.assert_allclose(np.degrees(yaw_of(got[:, 3:])), [-5, 85, 100, -85], atol=1e-6)
     np.testing.assert_allclose(got[:, :3], poses[:, :3])
     z_axis = Rotation.from_quat(got[3:, 3:]).apply([0.0, 0.0, 1.0])
     np.testing.assert_allclose(np.degrees(np.arccos(z_axis[:, 2])), [3.0], atol=1e-6)
@@ -154,7 +154,7 @@ def test_pi_m_reads_a_tools_position_from_its_direction_and_its_orientation_from
     seen, turns = seen_by_pi_m(pose[None], np.array([4]))
     np.testing.assert_allclose(np.degrees(turns), [[-90, 90]], atol=1e-9)
     np.testing.assert_allclose(np.degrees(np.arctan2(seen[0, 1], seen[0, 0])), 40, atol=1e-6)
-    np.testing.assert_allclose(np.degrees(heading(seen)), [20], atol=1e-6)
+    np.testing.assert_allclose(np.degrees(yaw_of(seen[:, 3:])), [20], atol=1e-6)
     back = in_view(seen, -turns)
     np.testing.assert_allclose(back[0, :3], pose[:3], atol=1e-12)
     np.testing.assert_allclose(abs(np.dot(back[0, 3:], pose[3:])), 1.0, atol=1e-12)

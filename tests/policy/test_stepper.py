@@ -2,9 +2,10 @@
 
 import numpy as np
 
+from hsp.geometry import yaw_of
 from hsp.policy.stepper import Stepper
 from hsp.policy.train import TrainConfig, train
-from hsp.policy.features import episode_steps, heading
+from hsp.policy.features import episode_steps
 from tests.policy.test_features import CLASSES, _steps, reach_rest_reach
 
 
@@ -153,5 +154,5 @@ def test_a_grasp_from_above_is_learnt_with_the_fingers_on_the_faces_whatever_the
                       folds=np.array([2, 4, 1]))
     for _ in range(6):
         c = Stepper(policy, 1).step(_grasping_a_cube(rng, H)[:1])
-        fingers = np.degrees(heading(c.waypoint[:1].astype(np.float64)))[0]
+        fingers = np.degrees(yaw_of(c.waypoint[0, 3:].astype(np.float64)))
         assert abs((fingers + 45) % 90 - 45) < 5, f"fingers at {fingers:.1f}° in the cube's frame"
