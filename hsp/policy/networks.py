@@ -84,11 +84,12 @@ class ObjectScorer(nn.Module):
     ``(..., D)``: an MLP on their concatenation, its first layer split so that the
     context's part is computed once per frame rather than once per object."""
 
-    def __init__(self, d_object: int, d_context: int, hidden: int) -> None:
+    def __init__(self, d_object: int, d_context: int, hidden: int, dropout: float = 0.0) -> None:
         super().__init__()
         self.object_in = nn.Linear(d_object, hidden)
         self.context_in = nn.Linear(d_context, hidden, bias=False)
-        self.rest = nn.Sequential(nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+        self.rest = nn.Sequential(nn.ReLU(), nn.Dropout(dropout), nn.Linear(hidden, hidden), nn.ReLU(), nn.Dropout(dropout),
+                                  nn.Linear(hidden, 1))
 
     def forward(self, objects: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
         return self.rest(self.object_in(objects) + self.context_in(context).unsqueeze(-2))[..., 0]
@@ -104,6 +105,8 @@ class Sizes:
     """Least fraction of the remaining way that π_l's mean step covers."""
     modes: int = 2
     """Components of π_m's mixture in the target's frame, and as many at the tool's pose."""
+    dropout: float = 0.0
+    """Dropout of π_h's hidden units in training."""
 
     @property
     def object_features(self) -> int:
@@ -125,11 +128,17 @@ class Hierarchy(nn.Module):
         C = s.classes
         self.progress = nn.Sequential(nn.Linear(7, s.hidden), nn.ReLU())
         self.memory = nn.LSTM(2 * C + 7, s.memory, batch_first=True)
-        self.tool_head = ObjectScorer(s.object_features, s.context, s.hidden)
-        self.target_head = ObjectScorer(s.object_features + 7, C + s.context, s.hidden)
+        self.tool_head = ObjectScorer(s.object_features, s.context, s.hidden, s.dropout)
+        self.target_head = ObjectScorer(s.object_features + 7, C + s.context, s.hidden, s.dropout)
         self.intermediate = mlp(2 * C + 7 + 2 * FLAGS, 2 * s.modes * 15, s.hidden)
         self.low = mlp(2 * C + 7 + 7 + 6, 12, s.hidden)
         self.retrieve = nn.Linear(s.memory, 2 * C + 7)
+
+    def levels(self) -> dict[str, list[nn.Module]]:
+        """The modules of each level; none is shared (π_m and π_l read no memory), so each
+        level's checkpoint can be chosen on its own."""
+        return {"pi_h": [self.progress, self.memory, self.tool_head, self.target_head, self.retrieve],
+                "pi_m": [self.intermediate], "pi_l": [self.low]}
 
     def remember(self, history: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None
                  ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:

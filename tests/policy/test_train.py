@@ -149,26 +149,42 @@ def test_the_checkpoint_kept_is_the_best_on_held_out_episodes():
     data = _data()
     policy, report = train(data, OBJECTS, CLASSES, 2, TrainConfig(iterations=60, batch_steps=40, learning_rate=3e-3,
                                                                    checkpoint_every=20), seed=0, held_out=data[:1])
-    assert report["checkpoint_iteration"] in (20, 40, 60)
+    assert {report[f"checkpoint_iteration_{level}"] for level in ("pi_h", "pi_m", "pi_l")} <= {20, 40, 60}
     assert report["validation_decision_subtask_accuracy"] == pytest.approx(
         validate(policy, data[:1])["decision_subtask_accuracy"])
 
 
-def test_among_equally_right_checkpoints_the_more_precise_one_is_kept(monkeypatch):
-    """Held-out decision accuracy first, then the smaller way-point error."""
+def test_each_level_is_kept_from_its_own_best_checkpoint(monkeypatch):
+    """π_h by held-out decisions (then running free), π_m by way-point error, π_l by step
+    error: each level's weights are those of its best validation, whatever the others'."""
     import hsp.policy.train as train_module
 
-    scripted = iter([(0.9, 1.0), (1.0, 5.0), (1.0, 2.0), (1.0, 3.0)])
+    scripted = iter([(0.9, 1.0, 3.0), (1.0, 5.0, 2.0), (1.0, 2.0, 9.0), (0.8, 3.0, 1.0)])
+    kept: dict[int, dict] = {}
+    seen: list[dict] = []
 
     def fake_validate(policy, episodes):
-        right, mm = next(scripted)
-        return {"decision_subtask_accuracy": right, "waypoint_error_mm_teacher_forced": mm,
-                "waypoint_turn_deg_teacher_forced": 0.0, "pair_accuracy_free": 0.0}
+        snapshot = {k: v.clone() for k, v in policy.net.state_dict().items()}
+        try:
+            right, mm, step = next(scripted)
+        except StopIteration:  # the figures of the policy returned
+            seen.append(snapshot)
+            return {"decision_accuracy_teacher_forced": 0.0, "pair_accuracy_free": 0.0, "decision_subtask_accuracy": 0.0,
+                    "waypoint_error_mm_teacher_forced": 0.0, "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": 0.0}
+        kept[len(kept) + 1] = snapshot
+        return {"decision_accuracy_teacher_forced": right, "pair_accuracy_free": 0.5, "decision_subtask_accuracy": right,
+                "waypoint_error_mm_teacher_forced": mm, "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": step}
 
     monkeypatch.setattr(train_module, "validate", fake_validate)
     _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20),
                       seed=0, held_out=_data()[:1])
-    assert report["checkpoint_iteration"] == 60 and report["validation_waypoint_error_mm_teacher_forced"] == 2.0
+    assert (report["checkpoint_iteration_pi_h"], report["checkpoint_iteration_pi_m"],
+            report["checkpoint_iteration_pi_l"]) == (40, 20, 80)
+    final = seen[0]
+    for name, value in final.items():
+        source = 2 if name.startswith(("tool_head", "target_head", "memory", "progress", "retrieve")) else (
+            1 if name.startswith("intermediate") else 4)
+        assert torch.equal(value, kept[source][name]), name
 
 
 def test_save_and_load_give_the_same_policy(tmp_path):
