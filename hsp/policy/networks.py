@@ -2,13 +2,15 @@
 
 * Memory: an LSTM(32) over the history input (labels of o+_{t−1}, o*_{t−1} and w_{t−1});
   its output M(h_t), g_t embedded by FC(64)+ReLU, e_t and the per-label done fractions
-  form the context every level reads.
+  form the context π_h reads.
 * π_h: two softmax heads, tool and target (the paper's L_o+ and L_o*). Each scores every
   object with one MLP (two hidden layers of 64) from that object's features (semantic
   label, its height and tilt, the end-effector in its frame, history flags, tracked) and
   the context, so identical objects are interchangeable. The target head also reads the
   tool in the candidate's frame and the tool's label; the end-effector and the tool itself
-  are never targets. Of world poses (the objects', e_t) π_h reads only what does not
+  are never targets. 20 % of their hidden units are dropped in training (``dropout``): a
+  few hundred decisions are otherwise fitted exactly by whatever features tell them apart.
+  Of world poses (the objects', e_t) π_h reads only what does not
   change when the whole scene is moved or turned on the table (:func:`upright`): which
   object comes next does not depend on where the layout lies, and with x, y and heading
   the few training episodes were told apart by their layouts (stacking-2: held-out
@@ -120,7 +122,7 @@ class Sizes:
 
 
 class Hierarchy(nn.Module):
-    """π_h, π_m and π_l with the LSTM memory they share."""
+    """π_h (with the LSTM memory it reads), π_m and π_l."""
 
     def __init__(self, sizes: Sizes) -> None:
         super().__init__()

@@ -24,8 +24,8 @@ L = L_o+ + L_o* + L_w + L_action + L_mem + L_ret:
 Terms are means over the frames whose tool and target are tracked (L_action: whose step is
 observed). Batches are whole episodes, drawn until they hold ``batch_steps`` frames, so the
 LSTM reads every history from its start. Every ``checkpoint_every`` iterations the policy
-is validated on the held-out episodes (:func:`validate`, running free among others) and
-the one that decides best there is kept.
+is validated on the held-out episodes (:func:`validate`, running free among others), and
+each level is kept from the checkpoint where it does best there (:func:`level_scores`).
 """
 
 from __future__ import annotations
@@ -329,9 +329,18 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     pair (``decision_copy_previous``); the median distance (mm) of π_m's way-point from the
     label, free (over all frames) and teacher-forced (at decisions); how often the pair is
     right with its way-point within ``WAYPOINT_HIT_M``, running free over all frames
-    (``free_subtask_accuracy``) and at the decisions (``decision_subtask_accuracy``, what
-    checkpoints are chosen on: what the robot is asked); and the median distance (mm) of
-    π_l's mean step from the observed one."""
+    (``free_subtask_accuracy``) and at the decisions (``decision_subtask_accuracy``: what
+    the robot is asked); and the median distance (mm) of π_l's mean step from the observed
+    one. The networks are asked in evaluation mode (no dropout)."""
+    was_training = policy.net.training
+    policy.net.eval()
+    try:
+        return _validate(policy, episodes)
+    finally:
+        policy.net.train(was_training)
+
+
+def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     b = batch(episodes, list(range(len(episodes))))
     first = np.zeros(b["frame"].shape, bool)
     first[:, 0] = True
@@ -378,9 +387,10 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
 
 
 def level_scores(figures: dict[str, float]) -> dict[str, tuple[float, ...]]:
-    """How good each level is on held-out episodes, higher better: π_h by its decisions
-    with the labelled history, then running free; π_m by its way-points' distance, then
-    turn, from the labels at the decisions; π_l by its steps' distance from the observed."""
+    """How good each level is on held-out episodes, higher better (NaN, nothing to judge,
+    is the worst): π_h by its decisions with the labelled history, then running free; π_m
+    by its way-points' distance, then turn, from the labels at the decisions; π_l by its
+    steps' distance from the observed."""
     f = {k: float(np.nan_to_num(v, nan=-np.inf if "accuracy" in k else np.inf)) for k, v in figures.items()}
     return {"pi_h": (f["decision_accuracy_teacher_forced"], f["pair_accuracy_free"]),
             "pi_m": (-f["waypoint_error_mm_teacher_forced"], -f["waypoint_turn_deg_teacher_forced"]),
@@ -402,6 +412,8 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
     if cfg.iterations < 1 or cfg.batch_steps < 1 or cfg.checkpoint_every < 1:
         raise HspError(f"train: iterations, batch_steps and checkpoint_every must be ≥ 1, got {cfg.iterations}, "
                        f"{cfg.batch_steps}, {cfg.checkpoint_every}")
+    if not 0.0 <= cfg.dropout < 1.0:
+        raise HspError(f"train: dropout must be in [0, 1), got {cfg.dropout}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     net = Hierarchy(Sizes(len(objects), n_classes, cfg.hidden, cfg.memory, cfg.min_fraction, cfg.modes, cfg.dropout))
@@ -424,21 +436,19 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
         schedule.step()
         report = {f"loss_{k}": v.item() for k, v in parts.items()} | {"final_loss": loss.item()}
         if held_out and (it % cfg.checkpoint_every == 0 or it == cfg.iterations):
-            net.eval()
             figures = validate(policy, held_out)
-            net.train()
-            log.info("iteration %d: held out, decisions right %.3f (way-point %.1f mm, %.1f°); running free, pair %.3f",
-                     it, figures["decision_subtask_accuracy"], figures["waypoint_error_mm_teacher_forced"],
-                     figures["waypoint_turn_deg_teacher_forced"], figures["pair_accuracy_free"])
+            log.info("iteration %d: held out, π_h's decisions right %.3f (running free, pair %.3f); π_m's way-points "
+                     "%.1f mm, %.1f° off; π_l's steps %.1f mm off", it, figures["decision_accuracy_teacher_forced"],
+                     figures["pair_accuracy_free"], figures["waypoint_error_mm_teacher_forced"],
+                     figures["waypoint_turn_deg_teacher_forced"], figures["action_error_mm"])
             for level, score in level_scores(figures).items():
-                if level not in best or score > best[level][0]:
+                if level not in best or score >= best[level][0]:  # among equals, the later (further trained)
                     best[level] = (score, it, [copy.deepcopy(m.state_dict()) for m in net.levels()[level]])
     if best:
-        for level, (_, it, states) in best.items():
+        for level, (_, kept, states) in best.items():
             for module, state in zip(net.levels()[level], states):
                 module.load_state_dict(state)
-            report[f"checkpoint_iteration_{level}"] = it
-        net.eval()
+            report[f"checkpoint_iteration_{level}"] = kept
         report |= {f"validation_{k}": v for k, v in validate(policy, held_out).items()}
     net.eval()
     return policy, report

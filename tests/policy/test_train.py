@@ -145,46 +145,53 @@ def test_the_same_seed_gives_the_same_weights():
         assert torch.equal(x, y), k
 
 
-def test_the_checkpoint_kept_is_the_best_on_held_out_episodes():
+def test_the_report_gives_the_figures_of_the_policy_returned_in_evaluation_mode():
     data = _data()
     policy, report = train(data, OBJECTS, CLASSES, 2, TrainConfig(iterations=60, batch_steps=40, learning_rate=3e-3,
                                                                    checkpoint_every=20), seed=0, held_out=data[:1])
     assert {report[f"checkpoint_iteration_{level}"] for level in ("pi_h", "pi_m", "pi_l")} <= {20, 40, 60}
+    assert not policy.net.training
     assert report["validation_decision_subtask_accuracy"] == pytest.approx(
         validate(policy, data[:1])["decision_subtask_accuracy"])
 
 
+def test_every_weight_belongs_to_exactly_one_level():
+    net = Hierarchy(Sizes(len(OBJECTS), 2))
+    owners = [id(p) for modules in net.levels().values() for m in modules for p in m.parameters()]
+    assert len(owners) == len(set(owners)) and set(owners) == {id(p) for p in net.parameters()}
+
+
 def test_each_level_is_kept_from_its_own_best_checkpoint(monkeypatch):
-    """π_h by held-out decisions (then running free), π_m by way-point error, π_l by step
-    error: each level's weights are those of its best validation, whatever the others'."""
+    """π_h by held-out decisions, then running free (ties: the later); π_m by way-point
+    error; π_l by step error: each level's weights are those of its best validation."""
     import hsp.policy.train as train_module
 
-    scripted = iter([(0.9, 1.0, 3.0), (1.0, 5.0, 2.0), (1.0, 2.0, 9.0), (0.8, 3.0, 1.0)])
+    # (decisions right, running free, way-point mm, step mm) at iterations 20, 40, 60, 80
+    scripted = iter([(0.9, 0.5, 1.0, 3.0), (1.0, 0.5, 5.0, 2.0), (1.0, 0.6, 2.0, 1.0), (1.0, 0.6, np.nan, 9.0)])
     kept: dict[int, dict] = {}
-    seen: list[dict] = []
+    returned: list[dict] = []
 
     def fake_validate(policy, episodes):
         snapshot = {k: v.clone() for k, v in policy.net.state_dict().items()}
-        try:
-            right, mm, step = next(scripted)
-        except StopIteration:  # the figures of the policy returned
-            seen.append(snapshot)
-            return {"decision_accuracy_teacher_forced": 0.0, "pair_accuracy_free": 0.0, "decision_subtask_accuracy": 0.0,
-                    "waypoint_error_mm_teacher_forced": 0.0, "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": 0.0}
-        kept[len(kept) + 1] = snapshot
-        return {"decision_accuracy_teacher_forced": right, "pair_accuracy_free": 0.5, "decision_subtask_accuracy": right,
+        right, free, mm, step = next(scripted, (0.0, 0.0, 0.0, 0.0))
+        (kept.__setitem__(20 * (len(kept) + 1), snapshot) if len(kept) < 4 else returned.append(snapshot))
+        return {"decision_accuracy_teacher_forced": right, "pair_accuracy_free": free, "decision_subtask_accuracy": right,
                 "waypoint_error_mm_teacher_forced": mm, "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": step}
 
     monkeypatch.setattr(train_module, "validate", fake_validate)
     _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20),
                       seed=0, held_out=_data()[:1])
     assert (report["checkpoint_iteration_pi_h"], report["checkpoint_iteration_pi_m"],
-            report["checkpoint_iteration_pi_l"]) == (40, 20, 80)
-    final = seen[0]
-    for name, value in final.items():
-        source = 2 if name.startswith(("tool_head", "target_head", "memory", "progress", "retrieve")) else (
-            1 if name.startswith("intermediate") else 4)
-        assert torch.equal(value, kept[source][name]), name
+            report["checkpoint_iteration_pi_l"]) == (80, 20, 60)
+    assert len(returned) == 1
+    source = {"pi_h": 80, "pi_m": 20, "pi_l": 60}
+    net = Hierarchy(Sizes(len(OBJECTS), 2))
+    level_of = {f"{name}.{key}": level for level, modules in net.levels().items()
+                for name, module in net.named_children() if module in modules for key in module.state_dict()}
+    assert set(level_of) == set(returned[0])
+    for name, value in returned[0].items():
+        assert torch.equal(value, kept[source[level_of[name]]][name]), name
+        assert not torch.equal(kept[20][name], kept[80][name]), name  # the checkpoints do differ
 
 
 def test_save_and_load_give_the_same_policy(tmp_path):
@@ -234,3 +241,8 @@ def test_a_way_point_is_as_far_from_a_label_as_from_its_nearest_symmetric_equiva
     beside, other_side = np.array([0.05, 0, 0, 0, 0, 0, 1.0]), np.array([0, 0.05, 0, 0, 0, 0, 1.0])
     d = waypoint_distance(policy, np.stack([other_side] * 2), np.stack([beside] * 2), np.array([1, 2]))
     np.testing.assert_allclose(d, [0.0, 0.05 * np.sqrt(2)], atol=1e-9)
+
+
+def test_a_dropout_outside_0_to_1_is_refused():
+    with pytest.raises(HspError, match="dropout"):
+        train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=1, batch_steps=40, dropout=1.0), seed=0)
