@@ -327,7 +327,8 @@ def validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     repeating the previous label (``copy_previous``); at the labelled decision frames after
     the first, π_h's accuracy with the labelled history (teacher forcing), beside keeping the
     pair (``decision_copy_previous``); the median distance (mm) of π_m's way-point from the
-    label, free (over all frames) and teacher-forced (at decisions); how often the pair is
+    label, free (over all frames) and teacher-forced (at decisions, and how often it is within
+    ``WAYPOINT_HIT_M``: the right component, ``waypoint_hit_teacher_forced``); how often the pair is
     right with its way-point within ``WAYPOINT_HIT_M``, running free over all frames
     (``free_subtask_accuracy``) and at the decisions (``decision_subtask_accuracy``: what
     the robot is asked); and the median distance (mm) of π_l's mean step from the observed
@@ -381,6 +382,7 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
         "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
         "waypoint_error_mm_free": mm(free_w_err[labelled & free_pair]),
         "waypoint_error_mm_teacher_forced": mm(tf_w_err),
+        "waypoint_hit_teacher_forced": float((tf_w_err <= WAYPOINT_HIT_M).mean()) if tf_w_err.size else float("nan"),
         "waypoint_turn_deg_teacher_forced": float(np.median(tf_w_turn)) if tf_w_turn.size else float("nan"),
         "action_error_mm": mm(a_err[acted]),
     }
@@ -389,11 +391,13 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
 def level_scores(figures: dict[str, float]) -> dict[str, tuple[float, ...]]:
     """How good each level is on held-out episodes, higher better (NaN, nothing to judge,
     is the worst): π_h by its decisions with the labelled history, then running free; π_m
-    by its way-points' distance, then turn, from the labels at the decisions; π_l by its
-    steps' distance from the observed."""
+    at the decisions by how often its way-point is within ``WAYPOINT_HIT_M`` of the label
+    (the right component: a median does not see a few wrong ones), then the median distance
+    and turn; π_l by its steps' distance from the observed."""
     f = {k: float(np.nan_to_num(v, nan=-np.inf if "accuracy" in k else np.inf)) for k, v in figures.items()}
     return {"pi_h": (f["decision_accuracy_teacher_forced"], f["pair_accuracy_free"]),
-            "pi_m": (-f["waypoint_error_mm_teacher_forced"], -f["waypoint_turn_deg_teacher_forced"]),
+            "pi_m": (f["waypoint_hit_teacher_forced"], -f["waypoint_error_mm_teacher_forced"],
+                     -f["waypoint_turn_deg_teacher_forced"]),
             "pi_l": (-f["action_error_mm"],)}
 
 

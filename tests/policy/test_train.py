@@ -162,29 +162,32 @@ def test_every_weight_belongs_to_exactly_one_level():
 
 
 def test_each_level_is_kept_from_its_own_best_checkpoint(monkeypatch):
-    """π_h by held-out decisions, then running free (ties: the later); π_m by way-point
-    error; π_l by step error: each level's weights are those of its best validation."""
+    """π_h by held-out decisions, then running free (ties: the later); π_m by how often its
+    way-point is right, then its error; π_l by step error: each level's weights are those
+    of its best validation."""
     import hsp.policy.train as train_module
 
-    # (decisions right, running free, way-point mm, step mm) at iterations 20, 40, 60, 80
-    scripted = iter([(0.9, 0.5, 1.0, 3.0), (1.0, 0.5, 5.0, 2.0), (1.0, 0.6, 2.0, 1.0), (1.0, 0.6, np.nan, 9.0)])
+    # (decisions right, running free, way-points right, way-point mm, step mm) at iterations 20, 40, 60, 80
+    scripted = iter([(0.9, 0.5, 0.9, 1.0, 3.0), (1.0, 0.5, 1.0, 2.0, 2.0), (1.0, 0.6, 1.0, 5.0, 1.0),
+                     (1.0, 0.6, 1.0, np.nan, 9.0)])
     kept: dict[int, dict] = {}
     returned: list[dict] = []
 
     def fake_validate(policy, episodes):
         snapshot = {k: v.clone() for k, v in policy.net.state_dict().items()}
-        right, free, mm, step = next(scripted, (0.0, 0.0, 0.0, 0.0))
+        right, free, hit, mm, step = next(scripted, (0.0, 0.0, 0.0, 0.0, 0.0))
         (kept.__setitem__(20 * (len(kept) + 1), snapshot) if len(kept) < 4 else returned.append(snapshot))
         return {"decision_accuracy_teacher_forced": right, "pair_accuracy_free": free, "decision_subtask_accuracy": right,
-                "waypoint_error_mm_teacher_forced": mm, "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": step}
+                "waypoint_hit_teacher_forced": hit, "waypoint_error_mm_teacher_forced": mm,
+                "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": step}
 
     monkeypatch.setattr(train_module, "validate", fake_validate)
     _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20),
                       seed=0, held_out=_data()[:1])
     assert (report["checkpoint_iteration_pi_h"], report["checkpoint_iteration_pi_m"],
-            report["checkpoint_iteration_pi_l"]) == (80, 20, 60)
+            report["checkpoint_iteration_pi_l"]) == (80, 40, 60)
     assert len(returned) == 1
-    source = {"pi_h": 80, "pi_m": 20, "pi_l": 60}
+    source = {"pi_h": 80, "pi_m": 40, "pi_l": 60}
     net = Hierarchy(Sizes(len(OBJECTS), 2))
     level_of = {f"{name}.{key}": level for level, modules in net.levels().items()
                 for name, module in net.named_children() if module in modules for key in module.state_dict()}
