@@ -394,11 +394,12 @@ def level_scores(figures: dict[str, float]) -> dict[str, tuple[float, ...]]:
     at the decisions by how often its way-point is within ``WAYPOINT_HIT_M`` of the label
     (the right component: a median does not see a few wrong ones), then the median distance
     and turn; π_l by its steps' distance from the observed."""
-    f = {k: float(np.nan_to_num(v, nan=-np.inf if "accuracy" in k else np.inf)) for k, v in figures.items()}
-    return {"pi_h": (f["decision_accuracy_teacher_forced"], f["pair_accuracy_free"]),
-            "pi_m": (f["waypoint_hit_teacher_forced"], -f["waypoint_error_mm_teacher_forced"],
-                     -f["waypoint_turn_deg_teacher_forced"]),
-            "pi_l": (-f["action_error_mm"],)}
+    f = figures
+    scores = {"pi_h": (f["decision_accuracy_teacher_forced"], f["pair_accuracy_free"]),
+              "pi_m": (f["waypoint_hit_teacher_forced"], -f["waypoint_error_mm_teacher_forced"],
+                       -f["waypoint_turn_deg_teacher_forced"]),
+              "pi_l": (-f["action_error_mm"],)}
+    return {level: tuple(float(np.nan_to_num(x, nan=-np.inf)) for x in score) for level, score in scores.items()}
 
 
 def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_classes: int, cfg: TrainConfig,

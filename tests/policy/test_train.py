@@ -176,7 +176,10 @@ def test_each_level_is_kept_from_its_own_best_checkpoint(monkeypatch):
     def fake_validate(policy, episodes):
         snapshot = {k: v.clone() for k, v in policy.net.state_dict().items()}
         right, free, hit, mm, step = next(scripted, (0.0, 0.0, 0.0, 0.0, 0.0))
-        (kept.__setitem__(20 * (len(kept) + 1), snapshot) if len(kept) < 4 else returned.append(snapshot))
+        if len(kept) < 4:  # the four checkpoints' validations, then that of the policy returned
+            kept[20 * (len(kept) + 1)] = snapshot
+        else:
+            returned.append(snapshot)
         return {"decision_accuracy_teacher_forced": right, "pair_accuracy_free": free, "decision_subtask_accuracy": right,
                 "waypoint_hit_teacher_forced": hit, "waypoint_error_mm_teacher_forced": mm,
                 "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": step}
@@ -249,3 +252,15 @@ def test_a_way_point_is_as_far_from_a_label_as_from_its_nearest_symmetric_equiva
 def test_a_dropout_outside_0_to_1_is_refused():
     with pytest.raises(HspError, match="dropout"):
         train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=1, batch_steps=40, dropout=1.0), seed=0)
+
+
+def test_a_figure_with_nothing_to_judge_scores_worst():
+    from hsp.policy.train import level_scores
+
+    figures = {"decision_accuracy_teacher_forced": 0.5, "pair_accuracy_free": 0.5, "waypoint_hit_teacher_forced": 0.5,
+               "waypoint_error_mm_teacher_forced": 2.0, "waypoint_turn_deg_teacher_forced": 1.0, "action_error_mm": 2.0}
+    judged = level_scores(figures)
+    for name in figures:
+        unjudged = level_scores(figures | {name: float("nan")})
+        assert all(unjudged[level] <= judged[level] for level in judged), name
+        assert any(unjudged[level] < judged[level] for level in judged), name
