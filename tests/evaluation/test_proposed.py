@@ -97,3 +97,30 @@ def test_the_labelled_step_commands_the_next_pose(tasks):
     tcp = tcp_command(now, c_now, 1, 3, step)
     np.testing.assert_allclose(tcp[:3], later[0, :3], atol=1e-9)
     assert abs(abs(tcp[3:] @ later[0, 3:]) - 1) < 1e-9
+
+
+def test_commands_make_up_an_arm_that_settles_short():
+    """An arm that ends every move 1 mm short of its command, driven by steps of a fixed
+    fraction f of the remaining way, stops 1 mm / f short of w_t; with the shortfall made
+    up, it ends at w_t. A shortfall beyond the limit (an arm that cannot get there) is not."""
+    from hsp.evaluation.proposed import with_shortfall
+
+    w = np.array([0.5, 0.1, 0.2, *Rotation.from_euler("z", 30, degrees=True).as_quat()])
+    short = np.array([0.001, 0.0, 0.0])
+    f = 0.2
+
+    def settle(make_up: bool) -> np.ndarray:
+        pose, last = np.array([0.4, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0]), None
+        for _ in range(300):
+            command = apply_step(pose, f * rotvec_delta(pose, w))
+            if make_up and last is not None:
+                command = with_shortfall(command, pose, last, 0.01)
+            pose, last = np.concatenate([command[:3] - short, command[3:]]), command
+        return pose
+
+    plain, made_up = settle(False), settle(True)
+    np.testing.assert_allclose(plain[:3] - w[:3], -short / f, atol=1e-6)
+    np.testing.assert_allclose(made_up[:3], w[:3], atol=1e-9)
+    assert abs(abs(made_up[3:] @ w[3:]) - 1) < 1e-9
+    far = w + np.array([0.0, 0.03, 0.04, 0, 0, 0, 0])
+    np.testing.assert_array_equal(with_shortfall(w, w, far, 0.01), w)
