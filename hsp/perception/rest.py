@@ -9,7 +9,11 @@ is released as soon as ICP finds it more than ``release_m`` away: it is being mo
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as the depth image does not
-see through where it would be (:func:`seen_through`).
+see through where it would be (:func:`seen_through`). A mounted object (a nut on its stud)
+hidden under the end-effector, whose origin sits on its axis, turns with it: a socket
+turning on a nut turns the nut. Held still instead, a hex nut turned by 57° under the socket
+reads as unturned (its heading is seen modulo 60° once the socket lifts), and labels put the
+turn relative to a nut that never turned.
 """
 
 from __future__ import annotations
@@ -127,6 +131,8 @@ class RestState:
         self.still_at = np.zeros((n, 3))
         self._count = np.zeros(n, int)  # measurements in the position average
         self._turns = np.zeros(n, int)  # and in the heading average, restarted after a hidden spell
+        self._ee: np.ndarray | None = None  # the end-effector's pose at the last frame
+        self._top = np.array([float(np.max(x[:, 2])) if len(x) else 0.0 for x in self.lowest])
         self.fresh = np.zeros(n, bool)
         """Anchors whose heading has just started (anchored, turned, seen again after a
         hidden spell) and that have not been :meth:`settle`-d on a better estimate since."""
@@ -192,8 +198,10 @@ class RestState:
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
-                if not measured[i]:  # hidden (a nut under the socket may be turned): heading unknown
+                if not measured[i]:  # hidden (a nut under the socket may be turned): heading to find again
                     self._turns[i] = 0
+                    if self.mounted[i] and self._on_axis(i, poses[0]):
+                        self._turn_with_end_effector(i, poses[0])
                 out[i] = self._settled(i)
                 continue
             if not measured[i] or np.linalg.norm(poses[i, :3] - self.still_at[i]) > self.cfg.still_m:
@@ -202,4 +210,20 @@ class RestState:
             if self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg:
                 self._anchor(i, poses[i, :3], q_up)
                 out[i] = self._settled(i)
+        self._ee = poses[0].copy()
         return out
+
+    def _on_axis(self, i: int, ee: np.ndarray) -> bool:
+        """Whether the end-effector's origin sits on anchored object ``i``'s vertical axis
+        (within ``release_xy_m``), no higher than ``release_m`` above its top."""
+        offset = ee[:3] - self.anchor[i, :3]
+        return bool(np.linalg.norm(offset[:2]) <= self.cfg.release_xy_m
+                    and 0.0 <= offset[2] <= self._top[i] + self.cfg.release_m)
+
+    def _turn_with_end_effector(self, i: int, ee: np.ndarray) -> None:
+        """Turn anchor ``i`` about the vertical by the end-effector's turn since the last frame."""
+        if self._ee is None:
+            return
+        R = Rotation.from_quat(ee[3:]).as_matrix() @ Rotation.from_quat(self._ee[3:]).as_matrix().T
+        turn = Rotation.from_rotvec([0.0, 0.0, np.arctan2(R[1, 0], R[0, 0])])
+        self.anchor[i, 3:] = (turn * Rotation.from_quat(self.anchor[i, 3:])).as_quat()

@@ -101,3 +101,19 @@ def test_a_hidden_object_is_told_from_a_gone_one():
     assert seen_through(top, normals, M, depth, K, T_world_cam) == 0.0
     depth[:] = 0.0  # no readings: no evidence that it is hidden
     assert seen_through(top, normals, M, depth, K, T_world_cam) == 1.0
+
+
+def test_a_hidden_mounted_object_turns_with_the_end_effector_on_its_axis():
+    """A socket seated on a nut (its origin 9 mm above the nut's, on its axis) turns 50°
+    while the nut is hidden: the nut's heading turns with it; turning off the axis, not."""
+    def turned(ee_xy: list[float]) -> float:
+        rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3), mounted=[False, True])
+        nut = _pose([0.5, 0.1, 0.02], [0, 0, 0.2])
+        rest.start(np.stack([_pose([*ee_xy, 0.029], [0, 0, 0.0]), nut]), np.array([True, True]))
+        for k in range(6):
+            socket = _pose([*ee_xy, 0.029], [0, 0, np.radians(10.0 * k)])
+            out = rest.apply(np.stack([socket, nut]), np.array([True, k == 0]))
+        return float(np.degrees(Rotation.from_quat(out[1, 3:]).as_euler("xyz")[2] - 0.2))
+
+    assert np.isclose(turned([0.501, 0.1]), 50.0, atol=1e-6)
+    assert np.isclose(turned([0.52, 0.1]), 0.0, atol=1e-6), "2 cm off its axis: the socket is not on it"
