@@ -221,9 +221,8 @@ class RestState:
                     and 0.0 <= offset[2] <= self._top[i] + self.cfg.release_m)
 
     def _turn_with_end_effector(self, i: int, ee: np.ndarray) -> None:
-        """Turn anchor ``i`` about the vertical by the end-effector's turn since the last frame."""
-        if self._ee is None:
-            return
-        R = Rotation.from_quat(ee[3:]).as_matrix() @ Rotation.from_quat(self._ee[3:]).as_matrix().T
-        turn = Rotation.from_rotvec([0.0, 0.0, np.arctan2(R[1, 0], R[0, 0])])
-        self.anchor[i, 3:] = (turn * Rotation.from_quat(self.anchor[i, 3:])).as_quat()
+        """Turn anchor ``i`` about the vertical by the end-effector's turn since the last frame
+        (none when it tipped by more than 45° in one frame: no turn about the vertical)."""
+        turn = None if self._ee is None else _heading_change(ee[3:], self._ee[3:], 2 * np.pi)
+        if turn is not None:
+            self.anchor[i, 3:] = (Rotation.from_rotvec([0.0, 0.0, turn]) * Rotation.from_quat(self.anchor[i, 3:])).as_quat()
