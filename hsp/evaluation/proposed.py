@@ -15,17 +15,28 @@ the wrench stopped 5 mm from the nut, whose socket it must reach within 5 mm).
 
 Identical objects (the four lug nuts share a label) are interchangeable to the networks:
 π_h scores every object with the same weights from its own pose and history flags.
+
+A way-point near a round target's axis (a dip into the bucket) is the same place turned
+by any angle about that axis, and π_m learns it at the turn nearest the tool's heading
+(:func:`~hsp.policy.features.nearest_round_turn`). Given the arm's ``reach_error``, the
+runner goes to the turn nearest the learnt one that the arm reaches from where it is, as
+the robot demonstrator does (:func:`reachable_member`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hsp.errors import HspError
 from hsp.geometry import compose, relative
+from hsp.geometry.symmetry import z_folds
 from hsp.labeling.label import canonical_poses
+from hsp.policy.features import ARM_M, turned_about_z
 from hsp.policy.stepper import Stepper
+from hsp.sim.demonstrators.common import reachable_yaw
 from hsp.policy.train import Policy
 from hsp.tasks.registry import Task
 
@@ -47,6 +58,19 @@ def tcp_command(poses: np.ndarray, canonical: np.ndarray, tool: int, target: int
     offset = relative(poses[tool], canonical[tool])
     tool_next = compose(compose(canonical[target], apply_step(rel, step)), offset)
     return tool_next if tool == 0 else compose(tool_next, relative(poses[0], poses[tool]))
+
+
+def reachable_member(waypoint: np.ndarray, target_pose: np.ndarray, tcp_in_tool: np.ndarray,
+                     reach_error: Callable[[list[np.ndarray]], float]) -> np.ndarray:
+    """The way-point ``(7,)`` on a round target at world pose ``target_pose (7,)`` turned
+    about the target's axis by the least angle at which the arm reaches it
+    (:func:`~hsp.sim.demonstrators.common.reachable_yaw`), the tool held as
+    ``tcp_in_tool (7,)`` says; unchanged when it lies farther than ``ARM_M`` from the axis,
+    where a turn would take it elsewhere (a nut on a round wheel)."""
+    if np.linalg.norm(waypoint[:2]) > ARM_M:
+        return waypoint
+    tcp_at = lambda yaw: [compose(compose(target_pose, turned_about_z(waypoint, yaw)), tcp_in_tool)]  # noqa: E731
+    return turned_about_z(waypoint, reachable_yaw(0.0, tcp_at, reach_error))
 
 
 SHORTFALL_M = 0.01
@@ -75,17 +99,27 @@ class HierarchyRunner:
     :class:`~hsp.policy.stepper.Stepper`, whose history is its own earlier choices;
     ``trace`` keeps, per step, what the LSTM read and what was chosen."""
 
-    def __init__(self, policy: Policy, task: Task, source: str = "policy") -> None:
+    def __init__(self, policy: Policy, task: Task, source: str = "policy",
+                 reach_error: Callable[[list[np.ndarray]], float] | None = None) -> None:
         if policy.objects != task.names:
             raise HspError(f"{source}: a policy for objects {policy.objects}, not those of task {task.name!r} {task.names}")
-        self.policy, self.task = policy, task
+        self.policy, self.task, self.reach_error = policy, task, reach_error
         self.symmetries = [o.symmetry for o in task.objects]
+        self.round = np.array([z_folds(s) == 0 for s in self.symmetries])
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
         self.first = np.asarray(poses, np.float64).copy()
-        self.stepper = Stepper(self.policy, 1)
+        self.stepper = Stepper(self.policy, 1, None if self.reach_error is None else self._place)
         self.trace: list[dict[str, np.ndarray | int]] = []
         self.last: np.ndarray | None = None
+
+    def _place(self, tool: np.ndarray, target: np.ndarray, w: np.ndarray, world: np.ndarray) -> np.ndarray:
+        """The stepper's ``place``: a new way-point on a round target at a turn the arm reaches."""
+        out = w.astype(np.float64)
+        for b in np.flatnonzero(self.round[target]):
+            out[b] = reachable_member(out[b], world[b, target[b]], relative(world[b, 0], world[b, tool[b]]),
+                                      self.reach_error)
+        return out
 
     def canonical(self, poses: np.ndarray) -> np.ndarray:
         """World poses ``(n, 7)`` with symmetric objects' orientations made canonical by the

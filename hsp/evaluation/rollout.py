@@ -76,14 +76,14 @@ def held_out_seeds(seed: int, runs: int, episodes: int, recorded_episodes: int) 
     return out
 
 
-def load_runner(task: Task, method: str, model_dir: Path | None):
+def load_runner(task: Task, method: str, model_dir: Path | None, reach_error=None):
     """The runner of a trained hierarchy; a one-line error for a missing, damaged or foreign model."""
     from hsp.evaluation.proposed import HierarchyRunner
     from hsp.policy.train import load
 
     if model_dir is None or not Path(model_dir).exists():
         raise HspError(f"{model_dir}: model directory not found (run `hsp train {task.name} --method {method}`)")
-    return HierarchyRunner(load(model_dir), task, str(model_dir))
+    return HierarchyRunner(load(model_dir), task, str(model_dir), reach_error)
 
 
 def make_agent(task: Task, method: str, model_dir: Path | None, env: HspEnv):
@@ -93,7 +93,7 @@ def make_agent(task: Task, method: str, model_dir: Path | None, env: HspEnv):
 
         return Oracle(task, env.config.fps, env.reach_error)
     if method in ("proposed", "supervised"):
-        return load_runner(task, method, model_dir)
+        return load_runner(task, method, model_dir, env.reach_error)
     raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
 
 

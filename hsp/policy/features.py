@@ -71,6 +71,9 @@ class Steps:
     """p_t[o+_t, j] for every object j ``(H, n, 7)``: the tool seen from each candidate target."""
     candidate_waypoint: np.ndarray
     """p_k[o+_t, j] ``(H, n, 7)``: the way-point as each candidate target would put it."""
+    came_from: np.ndarray
+    """What π_m reads of the sub-task so far ``(H, CAME_FROM)`` (:func:`came_from`): where
+    the tool was at the sub-task's decision before this one."""
     remaining: np.ndarray
     """The way from p_t[o+, o*] to w_t, translation and rotation vector in the target's frame ``(H, 6)``."""
     action: np.ndarray
@@ -130,6 +133,44 @@ def history_flags(tool: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
     ended[:, 0, 1] = 0.0
     out[:, :, 2:] = np.maximum.accumulate(ended, axis=0)
     return out
+
+
+CAME_FROM = 3
+"""π_m's reading of the sub-task so far: whether it has a decision before this one, and the
+tool's rise and horizontal distance since then."""
+
+
+def moved_since(same: np.ndarray, before: np.ndarray, now: np.ndarray) -> np.ndarray:
+    """``(..., CAME_FROM)`` from whether the pair is the one chosen at the decision before
+    ``(...)`` and the tool's world positions then and now ``(..., 3)``: that flag, the
+    height it has come down by and the horizontal distance it has come (zeros without
+    one). Neither changes when the scene is moved or turned on the table."""
+    d = np.where(np.asarray(same)[..., None], np.asarray(before) - np.asarray(now), 0.0)
+    return np.concatenate([np.asarray(same, np.float32)[..., None], d[..., 2:], np.linalg.norm(d[..., :2], axis=-1,
+                                                                                               keepdims=True)], -1)
+
+
+def came_from(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, target: np.ndarray,
+              decision: np.ndarray) -> np.ndarray:
+    """Per frame ``(H, CAME_FROM)``, for π_m, which reads no memory: where the tool of the
+    frame's sub-task was at the decision before the one that began its present way-point,
+    if that decision chose the same pair (:func:`moved_since`). A brush arrives on the
+    plane above the canvas twice, at the start of its stroke and at its end, in the same
+    pose: come down from above, it strokes; come along the plane, it lifts (the paper's
+    π_m reads h_t for this). ``world`` ``(H, n, 7)``, ``tracked`` ``(H, n)``, the labels
+    ``(H,)`` and the decision frames ``(H,)`` bool."""
+    d, prev, has = decisions_before(decision)
+    same = has & (tool[prev] == tool[d]) & (target[prev] == target[d]) & tracked[prev, tool[d]] & tracked[d, tool[d]]
+    return moved_since(same, world[prev, tool[d], :3], world[d, tool[d], :3]).astype(np.float32)
+
+
+def decisions_before(decision: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame of decision frames ``decision`` ``(H,)`` bool (the first is one): the
+    decision that began its way-point, the decision before that, and whether there is one
+    ``(H,)`` each."""
+    at = np.flatnonzero(decision)
+    seg = np.searchsorted(at, np.arange(len(decision)), side="right") - 1
+    return at[np.maximum(seg, 0)], at[np.maximum(seg - 1, 0)], seg >= 1
 
 
 def done_fractions(flags: np.ndarray, classes: np.ndarray, n_classes: int) -> np.ndarray:
@@ -239,6 +280,7 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         tracked=tracked.astype(bool), tool=tool.astype(np.int64), target=target.astype(np.int64),
         current=current.astype(f32), waypoint=waypoint.astype(f32), equivalent=equivalent.astype(bool),
         candidate_current=candidate_current.astype(f32), candidate_waypoint=candidate_waypoint.astype(f32),
+        came_from=came_from(world, tracked, tool, target, new_choices(tool, target, waypoint_index)),
         remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
         labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
 
@@ -319,6 +361,36 @@ def nearest_symmetric(poses: np.ndarray, reference: np.ndarray, folds: np.ndarra
         q = (R * Rotation.from_euler("z", turn[:, None])).as_quat()
         out[ok, 3:] = q * np.where(np.sum(q * r[ok, 3:], -1) < 0, -1.0, 1.0)[:, None]  # the reference's sign
     return out.reshape(shape)
+
+
+ROUND_TURNS = 360
+"""Turns about a round target's axis compared by :func:`nearest_round_turn` (1° apart)."""
+
+
+def nearest_round_turn(poses: np.ndarray, reference: np.ndarray, round_: np.ndarray) -> np.ndarray:
+    """``poses`` ``(..., 7)`` in a round target's frame (``round_`` ``(...)``: a continuous
+    symmetry about its z axis; others are left as they are), turned about that axis to the
+    member of their orbit nearest ``reference`` ``(..., 7)``, at the length of
+    :func:`way_length`: the arc the position sweeps plus ``ARM_M`` times the angle between
+    the orientations. A tool dipped into a round bucket at any heading is one dip: on the
+    axis, the turn is the one that leaves the orientation nearest the tool's; a place
+    farther than ``ARM_M`` from the axis is kept (the turn would move it more than it
+    saves: a nut turned on a round wheel stays turned)."""
+    phi = 2 * np.pi * np.arange(ROUND_TURNS) / ROUND_TURNS  # (S,)
+    radius = np.linalg.norm(poses[..., :2], axis=-1)[..., None]
+    ok = np.asarray(round_) & (np.linalg.norm(poses[..., 3:], axis=-1) > 0) & (np.linalg.norm(reference[..., 3:], axis=-1) > 0)
+    unit = lambda q: np.where(ok[..., None], q, [0.0, 0.0, 0.0, 1.0]).reshape(-1, 4)  # noqa: E731  (a lost pose: as it is)
+    M = Rotation.from_quat(unit(poses[..., 3:])).as_matrix() @ Rotation.from_quat(unit(reference[..., 3:])).inv().as_matrix()
+    M = M.reshape(poses.shape[:-1] + (3, 3))
+    trace = (np.cos(phi) * (M[..., 0, 0] + M[..., 1, 1])[..., None] + np.sin(phi) * (M[..., 0, 1] - M[..., 1, 0])[..., None]
+             + M[..., 2, 2][..., None])  # tr(R_z(φ) R_w R_ref⁻¹)
+    angle = np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0))
+    cost = 2 * radius * np.abs(np.sin(phi / 2)) + ARM_M * angle  # (..., S)
+    turn = np.where(ok, phi[np.argmin(cost, -1)], 0.0)
+    turned = turned_about_z(poses, turn)
+    flip = ok & (np.sum(turned[..., 3:] * reference[..., 3:], -1) < 0)  # the reference's sign
+    return np.where(ok[..., None], np.concatenate([turned[..., :3], np.where(flip[..., None], -1.0, 1.0) * turned[..., 3:]], -1),
+                    poses)
 
 
 def views(folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

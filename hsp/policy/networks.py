@@ -15,7 +15,9 @@
   object comes next does not depend on where the layout lies, and with x, y and heading
   the few training episodes were told apart by their layouts (stacking-2: held-out
   decisions fell from iteration 2,000 on, 0.82 → 0.73; closed loop 0.00 → 0.20).
-* π_m: the pair's labels and history flags and p_t[o+, o*] → two hidden layers of 64 →
+* π_m: the pair's labels and history flags, p_t[o+, o*] and where the tool came from within
+  the sub-task (its rise and horizontal distance since the decision before: the one part
+  of h_t it reads, see below) → two hidden layers of 64 →
   a mixture of diagonal Gaussians over w_t (7), trained by its negative log-likelihood
   (L_w); the robot takes the mean of the heaviest component. ``modes`` components have
   their means in the target's frame (a place on the target: above it, on it) and as many
@@ -26,7 +28,7 @@
   loop: 3.7 cm above the block, between the labels' 0 and 8 cm, too high to grasp).
   Without the anchored components, a lift's way-point had to be copied from p_t through
   the hidden layers and came out centimetres off on held-out layouts. π_m reads the
-  history through the flags alone, not M(h_t), g_t or e_t: with them, the few decision
+  history through the flags and where the tool came from, not M(h_t), g_t or e_t: with them, the few decision
   frames it is trained on (~12 per episode) let it recognise the training episodes
   instead of the situation (held-out stacking-1 way-points within 5 mm: 0.52 with M(h_t)
   and the done fractions, 0.77 without).
@@ -50,7 +52,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import nn
 
-from hsp.policy.features import FLAGS
+from hsp.policy.features import CAME_FROM, FLAGS
 
 if TYPE_CHECKING:
     from hsp.policy.normalisation import Normalisation
@@ -132,7 +134,7 @@ class Hierarchy(nn.Module):
         self.memory = nn.LSTM(2 * C + 7, s.memory, batch_first=True)
         self.tool_head = ObjectScorer(s.object_features, s.context, s.hidden, s.dropout)
         self.target_head = ObjectScorer(s.object_features + 7, C + s.context, s.hidden, s.dropout)
-        self.intermediate = mlp(2 * C + 7 + 2 * FLAGS, 2 * s.modes * 15, s.hidden)
+        self.intermediate = mlp(2 * C + 7 + 2 * FLAGS + CAME_FROM, 2 * s.modes * 15, s.hidden)
         self.low = mlp(2 * C + 7 + 7 + 6, 12, s.hidden)
         self.retrieve = nn.Linear(s.memory, 2 * C + 7)
 
@@ -179,12 +181,13 @@ class Hierarchy(nn.Module):
         barred = (index == 0) | (index == tool.unsqueeze(-1))
         return torch.log_softmax(logits.masked_fill(barred, float("-inf")), -1)
 
-    def pi_m(self, classes: torch.Tensor, current: torch.Tensor, flags: torch.Tensor, anchor: torch.Tensor
-             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def pi_m(self, classes: torch.Tensor, current: torch.Tensor, flags: torch.Tensor, came_from: torch.Tensor,
+             anchor: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """π_m's mixture over w_t, standardised: log-weights ``(..., 2K)``, means and log-σ
         ``(..., 2K, 7)`` each; the last K means are offsets from ``anchor``, p_t[o+, o*] in
-        w_t's standardised units."""
-        out = self.intermediate(torch.cat([classes, current, flags], -1))
+        w_t's standardised units. ``came_from``: where the tool was at the sub-task's decision
+        before (:func:`~hsp.policy.features.came_from`), standardised."""
+        out = self.intermediate(torch.cat([classes, current, flags, came_from], -1))
         out = out.unflatten(-1, (2 * self.sizes.modes, 15))
         anchored = (torch.arange(2 * self.sizes.modes) >= self.sizes.modes).float()[:, None]  # (2K, 1)
         mean = out[..., 1:8] + anchored * anchor.unsqueeze(-2)

@@ -21,7 +21,7 @@ import torch
 from hsp.geometry import relative
 from hsp.labeling.label import EpisodeLabels
 from hsp.labeling.priors import NEG, PriorConfig, PriorScores
-from hsp.policy.features import episode_steps, one_hot
+from hsp.policy.features import decisions_before, episode_steps, moved_since, one_hot
 from hsp.policy.networks import mixture_log_prob
 from hsp.policy.train import Policy, batch, forward
 
@@ -56,7 +56,11 @@ class PolicyScores:
             i, j = torch.from_numpy(pairs[:, 0]), torch.from_numpy(pairs[:, 1])
             pair_classes = torch.cat([codes[i], codes[j]], -1).expand(self.H, -1, -1)
             pair_flags = torch.cat([flags[:, i], flags[:, j]], -1)
+            d, prev, has = decisions_before(steps.decision)  # each pair as if chosen at the previous round's decisions
+            same = has[:, None] & (steps.tool[prev][:, None] == pairs[:, 0]) & (steps.target[prev][:, None] == pairs[:, 1])
+            came = moved_since(same, world[prev][:, pairs[:, 0], :3], world[d][:, pairs[:, 0], :3]).astype(np.float32)
             self._mixture = net.pi_m(pair_classes, norm("current", torch.from_numpy(rel)), pair_flags,
+                                     norm("came_from", torch.from_numpy(came)),
                                      norm("waypoint", torch.from_numpy(rel)))  # (H, P, 2K) and (H, P, 2K, 7)
             self._candidates = norm("waypoint", torch.from_numpy(rel)).transpose(0, 1)  # (P, H, 7), standardised
         self._allowed = self.prior.candidates()

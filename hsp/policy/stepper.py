@@ -25,21 +25,24 @@ LSTM still reads the history every frame, as in training.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from hsp.policy.features import FLAGS, done_fractions, in_view, one_hot, remaining_way, seen_by_pi_m, way_length
+from hsp.policy.features import (FLAGS, done_fractions, in_view, moved_since, one_hot, remaining_way, seen_by_pi_m,
+                                 way_length)
 from hsp.geometry import normalize_quat, relative
 from hsp.policy.networks import mixture_mode
 
 
-def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndarray, flags: np.ndarray
-                  ) -> np.ndarray:
+def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndarray, flags: np.ndarray,
+                  came_from: np.ndarray) -> np.ndarray:
     """π_m's way-point w_t (the heaviest component's mean, physical units, unit quaternion)
     ``(B, 7)`` for the pairs (``tool``, ``target``) ``(B,)`` with p_t[o+, o*] ``current``
-    ``(B, 7)`` and every object's history flags ``(B, n, FLAGS)``. π_m is asked, as it
+    ``(B, 7)``, every object's history flags ``(B, n, FLAGS)`` and where the tool came from
+    ``(B, CAME_FROM)`` (:func:`~hsp.policy.features.came_from`). π_m is asked, as it
     learnt every decision, from the turns of its target that make the tool's position and
     its heading canonical (:func:`~hsp.policy.features.seen_by_pi_m`), and its answer is
     turned back."""
@@ -50,7 +53,8 @@ def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndar
     norm, net = policy.norm, policy.net
     seen, turns = seen_by_pi_m(np.asarray(current, np.float64), policy.object_folds()[target])
     x = torch.from_numpy(seen.astype(np.float32))
-    w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), pair_flags, norm("waypoint", x))))
+    came = norm("came_from", torch.from_numpy(np.asarray(came_from, np.float32)))
+    w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), pair_flags, came, norm("waypoint", x))))
     w = in_view(w.numpy().astype(np.float64), -turns)
     return np.concatenate([w[..., :3], normalize_quat(w[..., 3:])], -1).astype(np.float32)
 
@@ -78,9 +82,12 @@ class Choice:
 class Stepper:
     """Batched one-frame steps of a trained policy (``policy.net``, ``policy.norm``,
     ``policy.classes``, ``policy.n_classes``, ``policy.arrive_m``, ``policy.still_m``,
-    ``policy.settle_frames``) over ``batch`` episodes."""
+    ``policy.settle_frames``) over ``batch`` episodes. ``place(tool, target, w, world)``
+    (arrays ``(B,)``, ``(B,)``, ``(B, 7)``, ``(B, n, 7)`` → ``(B, 7)``), when given, turns
+    each new way-point into the one the robot goes to (a look-alike it can reach)."""
 
-    def __init__(self, policy, batch: int = 1) -> None:
+    def __init__(self, policy, batch: int = 1, place: Callable[..., np.ndarray] | None = None) -> None:
+        self.place = place
         self.policy, self.net, self.norm = policy, policy.net, policy.norm
         self.arrive_m, self.still_m, self.settle_frames = policy.arrive_m, policy.still_m, policy.settle_frames
         self.classes = np.asarray(policy.classes)
@@ -94,6 +101,7 @@ class Stepper:
         self.ended = np.zeros((batch, self.n, 2), np.float32)  # target, tool of an ended sub-task
         self.rested = np.zeros(batch, np.int64)  # frames in a row the tool has been at rest at its way-point
         self.prev_current: np.ndarray | None = None  # p_{t−1}[o+_{t−1}, o*_{t−1}]
+        self.last_decision: tuple[np.ndarray, ...] | None = None  # tool, target, the tool's position at the last decision
         self.remaining = np.zeros(batch)  # length of the way from the tool to w_{t−1} at t − 1
         self.shrink = 1.0 - 0.5 * policy.net.sizes.min_fraction  # less progress than this: stopped
 
@@ -171,14 +179,23 @@ class Stepper:
             target = np.where(decide, log_target.argmax(-1).numpy(), self._kept(1)) if forced is None else forced[1]
             current = relative(world[rows, tool], world[rows, target]).astype(np.float32)
             pair_classes = f(np.concatenate([self.class_codes[tool], self.class_codes[target]], -1))
-            w = pi_m_waypoint(self.policy, tool, target, current, flags)
+            position = world[rows, tool, :3]
+            last = self.last_decision or (tool, target, position)
+            same = (self.last_decision is not None) & (last[0] == tool) & (last[1] == target)
+            before = last[2]
+            w = pi_m_waypoint(self.policy, tool, target, current, flags, moved_since(same, before, position))
             if forced is not None:
                 w = forced[2].astype(np.float32)
-            elif self.prev is not None:
-                w = np.where(decide[:, None], w, self.prev[2])
+            else:
+                if self.place is not None and decide.any():
+                    w = self.place(tool, target, w, world).astype(np.float32)
+                if self.prev is not None:
+                    w = np.where(decide[:, None], w, self.prev[2])
             remaining = remaining_way(current, w).astype(np.float32)
             action, _ = net.pi_l(pair_classes, norm("current", f(current)), norm("waypoint", f(w)),
                                  norm("remaining", f(remaining)), f(remaining))
+        self.last_decision = tuple(np.where(decide.reshape((B,) + (1,) * (x.ndim - 1)), x, old)
+                                   for x, old in zip((tool, target, position), last))
         self.prev2_pair = None if self.prev is None else (self.prev[0], self.prev[1])
         self.prev = (tool, target, w)
         self.prev_current = current

@@ -45,15 +45,15 @@ from safetensors.torch import load_file, save_file
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
 from hsp.geometry import rotation_angle_deg
-from hsp.policy.features import (STEP_FIELDS, Steps, in_view, nearest_symmetric, one_hot, sector_turns, seen_by_pi_m,
-                                 turned_about_z, views)
+from hsp.policy.features import (STEP_FIELDS, Steps, in_view, nearest_round_turn, nearest_symmetric, one_hot,
+                                 sector_turns, seen_by_pi_m, turned_about_z, views)
 from hsp.policy.networks import Hierarchy, Sizes, gaussian_log_prob, mixture_log_prob
 from hsp.policy.normalisation import Normalisation
 from hsp.policy.stepper import Stepper, pi_m_waypoint
 
 log = logging.getLogger(__name__)
 
-FORMAT = 7
+FORMAT = 8
 """Layout of saved models; older ones are refused with a clear message."""
 WAYPOINT_HIT_M = 0.02
 """A way-point agrees with the label when within this (m)."""
@@ -153,6 +153,11 @@ def turned(b: dict[str, torch.Tensor], folds: np.ndarray, axis_m: float) -> dict
     from the turn that puts its heading there; as ``turned_candidate_current`` and
     ``turned_candidate_waypoint`` beside the rest of ``b``.
 
+    On a round target, a label is first taken at the turn of the target nearest the tool's
+    present pose (:func:`~hsp.policy.features.nearest_round_turn`): a hand dips a brush
+    into a round bucket at a heading it draws at random, which nothing observed tells and
+    a robot need not copy; a turn of a nut 10 cm from a round wheel's axis is kept.
+
     A label's position farther than ``axis_m`` from j's axis is then taken at its own turn
     into that sector: a cube's four sides are one place, and which of them the demonstrator
     used depends on how the cube's frame was chosen, which nothing observed tells; learnt
@@ -166,8 +171,10 @@ def turned(b: dict[str, torch.Tensor], folds: np.ndarray, axis_m: float) -> dict
     symmetry nearest the tool's present one (a hand's fingers at 0° and at 180° are one
     grasp)."""
     real = (b["frame"] & b["decision"]).numpy()  # π_m learns at decisions; padding has no poses to turn
-    current, turns = seen_by_pi_m(b["candidate_current"].numpy()[real].astype(np.float64), folds)  # (D, n, 7)
-    waypoint = in_view(b["candidate_waypoint"].numpy()[real].astype(np.float64), turns)
+    raw = b["candidate_current"].numpy()[real].astype(np.float64)
+    current, turns = seen_by_pi_m(raw, folds)  # (D, n, 7)
+    waypoint = nearest_round_turn(b["candidate_waypoint"].numpy()[real].astype(np.float64), raw, folds == 0)
+    waypoint = in_view(waypoint, turns)
     off_axis = np.linalg.norm(waypoint[..., :2], axis=-1) > axis_m
     waypoint[..., :3] = turned_about_z(waypoint, np.where(off_axis, sector_turns(waypoint, folds), 0.0))[..., :3]
     waypoint = nearest_symmetric(waypoint, current, folds[b["tool"].numpy()[real]][:, None])
@@ -219,7 +226,9 @@ def candidate_mixtures(policy: Policy, b: dict[str, torch.Tensor], at: tuple[tor
     D, n = current.shape[:2]
     pair_classes = torch.cat([codes[tool][:, None].expand(D, n, -1), codes.expand(D, n, -1)], -1)
     tool_flags = flags.gather(1, tool[:, None, None].expand(D, 1, flags.shape[-1])).expand(D, n, -1)
-    return net.pi_m(pair_classes, norm("current", current), torch.cat([tool_flags, flags], -1), norm("waypoint", current))
+    came_from = norm("came_from", b["came_from"][at])[:, None].expand(D, n, -1)
+    return net.pi_m(pair_classes, norm("current", current), torch.cat([tool_flags, flags], -1), came_from,
+                    norm("waypoint", current))
 
 
 def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...]
@@ -352,7 +361,7 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
         out = forward(policy, b, at)
         tf_w = pi_m_waypoint(policy, tool_at, target_at,
                              b["candidate_current"][at].numpy()[np.arange(len(target_at)), target_at],
-                             b["flags"][at].numpy())
+                             b["flags"][at].numpy(), b["came_from"][at].numpy())
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
     tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()

@@ -5,8 +5,9 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
-from hsp.evaluation.proposed import HierarchyRunner, apply_step
-from hsp.geometry import rotvec_delta
+from hsp.evaluation.proposed import HierarchyRunner, apply_step, reachable_member
+from hsp.geometry import compose, rotvec_delta, yaw_of
+from hsp.policy.features import CAME_FROM
 from hsp.policy.networks import Hierarchy, Sizes
 from hsp.policy.normalisation import FIELDS, Normalisation
 from hsp.policy.stage import semantic_classes
@@ -18,7 +19,7 @@ def untrained_policy(task, seed: int = 0) -> Policy:
     torch.manual_seed(seed)
     classes, n_classes = semantic_classes(task)
     net = Hierarchy(Sizes(len(task.objects), n_classes)).eval()
-    dims = {k: 6 if k in ("remaining", "action") else 7 for k in FIELDS}
+    dims = {k: 6 if k in ("remaining", "action") else CAME_FROM if k == "came_from" else 7 for k in FIELDS}
     stats = {f"{k}.mean": torch.zeros(d) for k, d in dims.items()} | {f"{k}.std": torch.ones(d) for k, d in dims.items()}
     stats["action.std"] = torch.full((6,), 0.002)
     return Policy(net, Normalisation(stats), task.names, classes, n_classes)
@@ -124,3 +125,20 @@ def test_commands_make_up_an_arm_that_settles_short():
     assert abs(abs(made_up[3:] @ w[3:]) - 1) < 1e-9
     far = w + np.array([0.0, 0.03, 0.04, 0, 0, 0, 0])
     np.testing.assert_array_equal(with_shortfall(w, w, far, 0.01), w)
+
+
+def test_a_way_point_on_a_round_targets_axis_is_gone_to_at_the_nearest_turn_the_arm_reaches():
+    """An arm that reaches only headings of its tool-centre point within ±30° of 90° goes
+    to a dip learnt at 0° in a bucket turned by 17° turned by 45° (the nearest of 16 turns
+    it reaches: 62°); a place
+    10 cm off the axis (a nut on a round wheel) stays where it was learnt."""
+    dip = np.r_[0.005, 0.0, 0.12, Rotation.from_euler("z", 0.0).as_quat()]
+    bucket = np.r_[0.5, 0.1, 0.0, Rotation.from_euler("z", 0.3).as_quat()]
+    grasp = np.r_[0.0, 0.0, 0.05, Rotation.from_euler("z", 0.0).as_quat()]
+    reach = lambda tcps: 0.0 if abs(np.degrees(yaw_of(tcps[-1][3:])) - 90) <= 30 else 1.0  # noqa: E731
+    got = reachable_member(dip, bucket, grasp, reach)
+    np.testing.assert_allclose(np.degrees(yaw_of(got[3:])), 45.0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(got[:2]), 0.005, atol=1e-12)
+    assert reach([compose(compose(bucket, got), grasp)]) == 0.0
+    off_axis = np.r_[0.1, 0.0, 0.05, dip[3:]]
+    np.testing.assert_array_equal(reachable_member(off_axis, bucket, grasp, reach), off_axis)

@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, relative, yaw_of
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import (episode_steps, history_flags, in_view, nearest_symmetric, sector_turns, seen_by_pi_m,
-                                 turned_about_z)
+from hsp.policy.features import (came_from, episode_steps, history_flags, in_view, nearest_round_turn, nearest_symmetric,
+                                 sector_turns, seen_by_pi_m, turned_about_z)
 from tests.labeling.test_em import _episode
 
 CLASSES = np.array([0, 1, 1])
@@ -158,3 +158,33 @@ def test_pi_m_reads_a_tools_position_from_its_direction_and_its_orientation_from
     back = in_view(seen, -turns)
     np.testing.assert_allclose(back[0, :3], pose[:3], atol=1e-12)
     np.testing.assert_allclose(abs(np.dot(back[0, 3:], pose[3:])), 1.0, atol=1e-12)
+
+
+def test_on_a_round_target_a_way_point_on_its_axis_takes_the_tools_heading_and_one_off_it_stays():
+    """A brush dipped tip down into a round bucket at a heading of 150° while it arrives at
+    20° is the dip at 20° (the bucket looks the same turned); a wrench's 50° turn on a nut
+    10 cm from a round wheel's axis is kept, since turning it back would carry it 8.7 cm
+    round the wheel; a target that is not round keeps both."""
+    tip_down = Rotation.from_euler("y", 90, degrees=True)
+    dip = np.r_[0.0, 0.0, 0.13, (Rotation.from_euler("z", 150, degrees=True) * tip_down).as_quat()]
+    arriving = np.r_[0.1, 0.1, 0.3, (Rotation.from_euler("z", 20, degrees=True) * Rotation.from_euler("y", 30, degrees=True)).as_quat()]
+    turn = _yawed(50, (0.1, 0.0, 0.05))
+    seated = _yawed(0, (0.1, 0.0, 0.05))
+    got = nearest_round_turn(np.stack([dip, turn, dip]), np.stack([arriving, seated, arriving]), np.array([True, True, False]))
+    want = Rotation.from_euler("z", 20, degrees=True) * tip_down
+    assert (Rotation.from_quat(got[0, 3:]) * want.inv()).magnitude() < np.radians(1)
+    np.testing.assert_allclose(got[0, :3], dip[:3], atol=1e-12)
+    np.testing.assert_allclose(got[1:], np.stack([turn, dip]), atol=1e-12)
+
+
+def test_pi_m_reads_where_the_tool_came_from_within_its_sub_task():
+    """Over, start, end of a stroke, with the same pair: at the start the brush has come
+    6 cm down, at the end 9 cm along; the first decision of a pair has come from nowhere."""
+    pos = np.array([[0.0, 0, 0.3], [0.1, 0, 0.16], [0.1, 0, 0.10], [0.19, 0, 0.10], [0.19, 0, 0.18]])
+    world = np.zeros((5, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 1, :3] = pos
+    tool, target = np.array([1, 1, 1, 1, 1]), np.array([2, 2, 2, 2, 2])
+    tool[0] = 0
+    got = came_from(world, np.ones((5, 3), bool), tool, target, np.ones(5, bool))
+    np.testing.assert_allclose(got, [[0, 0, 0], [0, 0, 0], [1, 0.06, 0], [1, 0, 0.09], [1, -0.08, 0]], atol=1e-6)

@@ -1,8 +1,10 @@
 """The Stepper: a sub-task runs until its tool comes to rest; only then do π_h and π_m choose."""
 
 import numpy as np
+import pytest
 
 from hsp.geometry import yaw_of
+import hsp.policy.stepper as stepper_module
 from hsp.policy.stepper import Stepper
 from hsp.policy.train import TrainConfig, train
 from hsp.policy.features import episode_steps
@@ -156,3 +158,33 @@ def test_a_grasp_from_above_is_learnt_with_the_fingers_on_the_faces_whatever_the
         c = Stepper(policy, 1).step(_grasping_a_cube(rng, H)[:1])
         fingers = np.degrees(yaw_of(c.waypoint[0, 3:].astype(np.float64)))
         assert abs((fingers + 45) % 90 - 45) < 5, f"fingers at {fingers:.1f}° in the cube's frame"
+
+
+def test_running_pi_m_reads_where_the_tool_came_from_as_it_was_trained_to():
+    """Over object 1, down onto it (one pair, two way-points), then to object 2: at each
+    decision the stepper gives π_m where its own tool was at its decision before, which is
+    what training gives it from the labels (:func:`~hsp.policy.features.came_from`)."""
+    x = np.concatenate([np.linspace(0, 0.3, 6), np.full(14, 0.3), np.linspace(0.3, 0.0, 8)])
+    z = np.concatenate([np.linspace(0.1, 0.2, 6), np.full(4, 0.2), np.linspace(0.2, 0.05, 6), np.full(12, 0.05)])
+    H = len(x)
+    world = np.zeros((H, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 1, :3] = [0.3, 0.0, 0.05]
+    world[:, 2, :3] = [0.0, 0.3, 0.05]
+    world[:, 0, 0], world[:, 0, 2] = x, z
+    world[20:, 0, 1] = np.linspace(0.0, 0.3, 8)
+    target = np.where(np.arange(H) < 20, 1, 2)
+    k = np.select([np.arange(H) < 9, np.arange(H) < 20], [5, 15], H - 1)
+    s = episode_steps(world, np.ones((H, 3), bool), np.zeros(H, np.int64), target, k, CLASSES, 2)
+    policy, _ = train([s], ["ee", "a", "b"], CLASSES, 2, TrainConfig(iterations=1, batch_steps=40), seed=0)
+    read = []
+    real = stepper_module.pi_m_waypoint
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(stepper_module, "pi_m_waypoint", lambda *a: read.append(a[-1]) or real(*a))
+        stepper = Stepper(policy, 1)
+        for t in range(H):
+            stepper.step(world[t:t + 1], forced=(s.tool[t:t + 1], s.target[t:t + 1], s.waypoint[t:t + 1]),
+                         ended=s.decision[t:t + 1])
+    at = np.flatnonzero(s.decision)
+    assert s.came_from[at, 0].tolist() == [0, 1, 0]  # over object 1, down onto it (the same pair), on to object 2
+    np.testing.assert_allclose(np.concatenate(read)[at], s.came_from[at], atol=1e-6)
