@@ -36,8 +36,8 @@ from hsp.geometry.symmetry import z_folds
 from hsp.labeling.label import canonical_poses
 from hsp.policy.features import ARM_M, turned_about_z
 from hsp.policy.stepper import Stepper
-from hsp.sim.demonstrators.common import reachable_yaw
 from hsp.policy.train import Policy
+from hsp.sim.demonstrators.common import reachable_yaw
 from hsp.tasks.registry import Task
 
 

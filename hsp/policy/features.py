@@ -273,6 +273,7 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         action[:-1] = rotvec_delta(current[:-1], rel[t[1:], tool[:-1], target[:-1]])
         acted[:-1] = labelled[:-1] & tracked[t[1:], tool[:-1]] & tracked[t[1:], target[:-1]] & ~waiting[:-1]
     f32 = np.float32
+    decision = new_choices(tool, target, waypoint_index)
     return Steps(
         world=world.astype(f32), ee_in_object=rel[:, 0].astype(f32), tool_in_object=rel[t, tool].astype(f32),
         flags=flags, done=done_fractions(flags, classes, n_classes),
@@ -280,9 +281,9 @@ def episode_steps(world: np.ndarray, tracked: np.ndarray, tool: np.ndarray, targ
         tracked=tracked.astype(bool), tool=tool.astype(np.int64), target=target.astype(np.int64),
         current=current.astype(f32), waypoint=waypoint.astype(f32), equivalent=equivalent.astype(bool),
         candidate_current=candidate_current.astype(f32), candidate_waypoint=candidate_waypoint.astype(f32),
-        came_from=came_from(world, tracked, tool, target, new_choices(tool, target, waypoint_index)),
-        remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32),
-        labelled=labelled, decision=new_choices(tool, target, waypoint_index), acted=acted)
+        came_from=came_from(world, tracked, tool, target, decision),
+        remaining=remaining_way(current, waypoint).astype(f32), action=action.astype(f32), labelled=labelled,
+        decision=decision, acted=acted)
 
 
 def turned_about_z(poses: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -377,20 +378,20 @@ def nearest_round_turn(poses: np.ndarray, reference: np.ndarray, round_: np.ndar
     farther than ``ARM_M`` from the axis is kept (the turn would move it more than it
     saves: a nut turned on a round wheel stays turned)."""
     phi = 2 * np.pi * np.arange(ROUND_TURNS) / ROUND_TURNS  # (S,)
-    radius = np.linalg.norm(poses[..., :2], axis=-1)[..., None]
-    ok = np.asarray(round_) & (np.linalg.norm(poses[..., 3:], axis=-1) > 0) & (np.linalg.norm(reference[..., 3:], axis=-1) > 0)
-    unit = lambda q: np.where(ok[..., None], q, [0.0, 0.0, 0.0, 1.0]).reshape(-1, 4)  # noqa: E731  (a lost pose: as it is)
-    M = Rotation.from_quat(unit(poses[..., 3:])).as_matrix() @ Rotation.from_quat(unit(reference[..., 3:])).inv().as_matrix()
-    M = M.reshape(poses.shape[:-1] + (3, 3))
-    trace = (np.cos(phi) * (M[..., 0, 0] + M[..., 1, 1])[..., None] + np.sin(phi) * (M[..., 0, 1] - M[..., 1, 0])[..., None]
-             + M[..., 2, 2][..., None])  # tr(R_z(φ) R_w R_ref⁻¹)
+    ok = np.asarray(round_) & (np.linalg.norm(poses[..., 3:], axis=-1) > 0) \
+        & (np.linalg.norm(reference[..., 3:], axis=-1) > 0)  # a lost pose is left as it is
+    quat = lambda q: Rotation.from_quat(np.where(ok[..., None], q, [0.0, 0.0, 0.0, 1.0]).reshape(-1, 4))  # noqa: E731
+    M = (quat(poses[..., 3:]) * quat(reference[..., 3:]).inv()).as_matrix().reshape(poses.shape[:-1] + (3, 3))
+    # tr(R_z(φ) R_w R_ref⁻¹) for every φ, then the angle between R_z(φ) R_w and R_ref
+    trace = np.cos(phi) * (M[..., 0, 0] + M[..., 1, 1])[..., None] \
+        + np.sin(phi) * (M[..., 0, 1] - M[..., 1, 0])[..., None] + M[..., 2, 2][..., None]
     angle = np.arccos(np.clip((trace - 1) / 2, -1.0, 1.0))
+    radius = np.linalg.norm(poses[..., :2], axis=-1)[..., None]
     cost = 2 * radius * np.abs(np.sin(phi / 2)) + ARM_M * angle  # (..., S)
-    turn = np.where(ok, phi[np.argmin(cost, -1)], 0.0)
-    turned = turned_about_z(poses, turn)
-    flip = ok & (np.sum(turned[..., 3:] * reference[..., 3:], -1) < 0)  # the reference's sign
-    return np.where(ok[..., None], np.concatenate([turned[..., :3], np.where(flip[..., None], -1.0, 1.0) * turned[..., 3:]], -1),
-                    poses)
+    out = turned_about_z(poses, np.where(ok, phi[np.argmin(cost, -1)], 0.0))
+    flip = ok & (np.sum(out[..., 3:] * reference[..., 3:], -1) < 0)  # the reference's sign
+    out[..., 3:] *= np.where(flip, -1.0, 1.0)[..., None]
+    return np.where(ok[..., None], out, poses)
 
 
 def views(folds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

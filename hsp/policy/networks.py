@@ -28,10 +28,10 @@
   loop: 3.7 cm above the block, between the labels' 0 and 8 cm, too high to grasp).
   Without the anchored components, a lift's way-point had to be copied from p_t through
   the hidden layers and came out centimetres off on held-out layouts. π_m reads the
-  history through the flags and where the tool came from, not M(h_t), g_t or e_t: with them, the few decision
-  frames it is trained on (~12 per episode) let it recognise the training episodes
-  instead of the situation (held-out stacking-1 way-points within 5 mm: 0.52 with M(h_t)
-  and the done fractions, 0.77 without).
+  history through the flags and where the tool came from, not M(h_t), g_t or e_t: with
+  them, the few decision frames it is trained on (~12 per episode) let it recognise the
+  training episodes instead of the situation (held-out stacking-1 way-points within
+  5 mm: 0.52 with M(h_t) and the done fractions, 0.77 without).
 * π_l: the pair's labels, p_t[o+, o*], w_t and the remaining way from one to the other →
   two hidden layers of 64 → a diagonal Gaussian over a_t. Its mean is a per-axis fraction
   of the remaining way, between ``min_fraction`` and 1: the step always heads for w_t,

@@ -7,7 +7,8 @@ import torch
 
 from hsp.policy.features import Steps
 
-FIELDS = ("world", "ee_in_object", "tool_in_object", "progress", "current", "waypoint", "came_from", "remaining", "action")
+FIELDS = ("world", "ee_in_object", "tool_in_object", "progress", "current", "waypoint", "came_from", "remaining",
+          "action")
 """Standardised fields of :class:`~hsp.policy.features.Steps`; per-object ones are pooled over
 objects (identical objects share their statistics)."""
 MIN_STD = 1e-3

@@ -57,7 +57,7 @@ class PolicyScores:
             pair_classes = torch.cat([codes[i], codes[j]], -1).expand(self.H, -1, -1)
             pair_flags = torch.cat([flags[:, i], flags[:, j]], -1)
             d, prev, has = decisions_before(steps.decision)  # each pair as if chosen at the previous round's decisions
-            same = has[:, None] & (steps.tool[prev][:, None] == pairs[:, 0]) & (steps.target[prev][:, None] == pairs[:, 1])
+            same = has[:, None] & (steps.tool[prev, None] == pairs[:, 0]) & (steps.target[prev, None] == pairs[:, 1])
             came = moved_since(same, world[prev][:, pairs[:, 0], :3], world[d][:, pairs[:, 0], :3]).astype(np.float32)
             self._mixture = net.pi_m(pair_classes, norm("current", torch.from_numpy(rel)), pair_flags,
                                      norm("came_from", torch.from_numpy(came)),

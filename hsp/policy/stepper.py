@@ -54,7 +54,8 @@ def pi_m_waypoint(policy, tool: np.ndarray, target: np.ndarray, current: np.ndar
     seen, turns = seen_by_pi_m(np.asarray(current, np.float64), policy.object_folds()[target])
     x = torch.from_numpy(seen.astype(np.float32))
     came = norm("came_from", torch.from_numpy(np.asarray(came_from, np.float32)))
-    w = norm.unscale("waypoint", mixture_mode(net.pi_m(classes, norm("current", x), pair_flags, came, norm("waypoint", x))))
+    mixture = net.pi_m(classes, norm("current", x), pair_flags, came, norm("waypoint", x))
+    w = norm.unscale("waypoint", mixture_mode(mixture))
     w = in_view(w.numpy().astype(np.float64), -turns)
     return np.concatenate([w[..., :3], normalize_quat(w[..., 3:])], -1).astype(np.float32)
 
@@ -101,7 +102,7 @@ class Stepper:
         self.ended = np.zeros((batch, self.n, 2), np.float32)  # target, tool of an ended sub-task
         self.rested = np.zeros(batch, np.int64)  # frames in a row the tool has been at rest at its way-point
         self.prev_current: np.ndarray | None = None  # p_{t−1}[o+_{t−1}, o*_{t−1}]
-        self.last_decision: tuple[np.ndarray, ...] | None = None  # tool, target, the tool's position at the last decision
+        self.last_decision: tuple[np.ndarray, ...] | None = None  # tool, target, the tool's position then
         self.remaining = np.zeros(batch)  # length of the way from the tool to w_{t−1} at t − 1
         self.shrink = 1.0 - 0.5 * policy.net.sizes.min_fraction  # less progress than this: stopped
 

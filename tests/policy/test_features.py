@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, relative, yaw_of
 from hsp.labeling.label import label_episode
 from hsp.labeling.priors import PriorConfig, relative_poses
-from hsp.policy.features import (came_from, episode_steps, history_flags, in_view, nearest_round_turn, nearest_symmetric,
-                                 sector_turns, seen_by_pi_m, turned_about_z)
+from hsp.policy.features import (came_from, episode_steps, history_flags, in_view, nearest_round_turn,
+                                 nearest_symmetric, sector_turns, seen_by_pi_m, turned_about_z)
 from tests.labeling.test_em import _episode
 
 CLASSES = np.array([0, 1, 1])
@@ -167,10 +167,11 @@ def test_on_a_round_target_a_way_point_on_its_axis_takes_the_tools_heading_and_o
     round the wheel; a target that is not round keeps both."""
     tip_down = Rotation.from_euler("y", 90, degrees=True)
     dip = np.r_[0.0, 0.0, 0.13, (Rotation.from_euler("z", 150, degrees=True) * tip_down).as_quat()]
-    arriving = np.r_[0.1, 0.1, 0.3, (Rotation.from_euler("z", 20, degrees=True) * Rotation.from_euler("y", 30, degrees=True)).as_quat()]
+    arriving = np.r_[0.1, 0.1, 0.3, Rotation.from_euler("ZY", [20, 30], degrees=True).as_quat()]
     turn = _yawed(50, (0.1, 0.0, 0.05))
     seated = _yawed(0, (0.1, 0.0, 0.05))
-    got = nearest_round_turn(np.stack([dip, turn, dip]), np.stack([arriving, seated, arriving]), np.array([True, True, False]))
+    got = nearest_round_turn(np.stack([dip, turn, dip]), np.stack([arriving, seated, arriving]),
+                             np.array([True, True, False]))
     want = Rotation.from_euler("z", 20, degrees=True) * tip_down
     assert (Rotation.from_quat(got[0, 3:]) * want.inv()).magnitude() < np.radians(1)
     np.testing.assert_allclose(got[0, :3], dip[:3], atol=1e-12)
