@@ -33,12 +33,15 @@ from __future__ import annotations
 import copy
 import json
 import logging
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from rich.progress import track
+from torch import nn
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
@@ -77,6 +80,9 @@ class TrainConfig:
     modes: int = 2
     """Components of π_m's mixture over way-points in the target's frame, and as many at
     the tool's current pose."""
+    pi_m_restarts: int = 3
+    """π_m is fitted from this many random initialisations side by side, and the one that
+    does best on the held-out episodes is kept (:func:`train`; one without held-out episodes)."""
     dropout: float = 0.2
     """Dropout of π_h's hidden units in training: a few hundred decisions are fitted
     exactly by features that happen to tell them apart (a block's place beside another
@@ -239,11 +245,24 @@ def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[to
     return mixture_log_prob(candidate_mixtures(policy, b, at), policy.norm("waypoint", waypoint))
 
 
-def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+@contextmanager
+def pi_m_of(net: Hierarchy, module: nn.Module) -> Iterator[Hierarchy]:
+    """``net`` with ``module`` (shaped as ``net.intermediate``) as its π_m for the duration."""
+    kept = net.intermediate
+    net.intermediate = module
+    try:
+        yield net
+    finally:
+        net.intermediate = kept
+
+
+def losses(policy: Policy, b: dict[str, torch.Tensor], restarts: Sequence[nn.Module] = ()) -> dict[str, torch.Tensor]:
     """The six terms of L on one batch (means over the frames that count). Where the
     target is one of an equivalence set S (targets the poses cannot tell apart), L_o* is
     −log Σ_{j∈S} π(j | o+) and L_o* + L_w is −log Σ_{j∈S} π(j | o+) π_m(p_k[o+, j] | j):
-    the member whose frame explains the way-point best takes the set's probability."""
+    the member whose frame explains the way-point best takes the set's probability. With
+    ``restarts`` (other π_m modules), their L_w summed is a seventh term, with π_h held
+    fixed in it (π_h learns from the π_m it runs with)."""
     norm, C = policy.norm, policy.n_classes
     labelled = b["labelled"] & b["frame"]
     decided = labelled & b["decision"]
@@ -272,8 +291,21 @@ def losses(policy: Policy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
     set_mass = torch.logsumexp(log_target.masked_fill(~members, float("-inf")), -1)
     joint = torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
     D = max(len(members), 1)
-    return {"tool": tool_nll.sum() / D, "target": -set_mass.sum() / D, "waypoint": -(joint - set_mass).sum() / D,
-            "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
+    out = {"tool": tool_nll.sum() / D, "target": -set_mass.sum() / D, "waypoint": -(joint - set_mass).sum() / D,
+           "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
+    if restarts:
+        fixed, fixed_mass = log_target.detach(), set_mass.detach()
+        out["waypoint_restarts"] = sum(_restart_waypoint_loss(policy, b, at, module, fixed, members, fixed_mass)
+                                       for module in restarts) / D
+    return out
+
+
+def _restart_waypoint_loss(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...], module: nn.Module,
+                           log_target: torch.Tensor, members: torch.Tensor, set_mass: torch.Tensor) -> torch.Tensor:
+    """Σ L_w of π_m ``module`` over the decisions ``at`` (:func:`losses`)."""
+    with pi_m_of(policy.net, module):
+        joint = torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
+    return -(joint - set_mass).sum()
 
 
 def split(n_episodes: int, every: int) -> tuple[list[int], list[int]]:
@@ -356,21 +388,16 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     first[:, 0] = True
     decided = (b["labelled"] & b["frame"] & b["decision"]).numpy() & ~first
     at = torch.from_numpy(decided).nonzero(as_tuple=True)
-    tool_at, target_at = b["tool"][at].numpy(), b["target"][at].numpy()
     with torch.no_grad():
         out = forward(policy, b, at)
-        tf_w = pi_m_waypoint(policy, tool_at, target_at,
-                             b["candidate_current"][at].numpy()[np.arange(len(target_at)), target_at],
-                             b["flags"][at].numpy(), b["came_from"][at].numpy())
+    _, tf_w_err, tf_w_turn = _pi_m_teacher_forced(policy, b, decided)
     labelled = (b["labelled"] & b["frame"]).numpy()
     acted = (b["acted"] & b["frame"]).numpy()
-    tool, target, w = b["tool"].numpy(), b["target"].numpy(), b["waypoint"].numpy()
+    tool, target = b["tool"].numpy(), b["target"].numpy()
     members = b["equivalent"].numpy()
     member = lambda j: np.take_along_axis(members, j[..., None], -1)[..., 0]  # noqa: E731
     tf_tool = out["log_tool"].argmax(-1).numpy()  # at the decisions
     tf_target = out["log_target"].argmax(-1).numpy()  # given the labelled tool
-    tf_w_err = waypoint_distance(policy, tf_w, w[decided], target[decided])  # at the decisions, in their order
-    tf_w_turn = waypoint_turn(policy, tf_w, w[decided], tool[decided], target[decided])
     tf_right = (tf_tool == tool[decided]) & np.take_along_axis(members[decided], tf_target[:, None], -1)[:, 0]
     free = free_run(policy, episodes)
     free_pair = (free["tool"] == tool) & member(free["target"])
@@ -381,20 +408,47 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     copy = np.zeros_like(labelled)
     copy[:, 1:] = (tool[:, 1:] == tool[:, :-1]) & (target[:, 1:] == target[:, :-1])
     a_err = np.linalg.norm((out["action"].numpy() - b["action"].numpy())[..., :3], axis=-1)
-    mm = lambda x: float(1000 * np.median(x)) if x.size else float("nan")  # noqa: E731
-    return {
+    return _pi_m_figures(tf_w_err, tf_w_turn) | {
         "pair_accuracy_free": float(free_pair[labelled].mean()),
         "pair_accuracy_copy_previous": float(copy[labelled & ~first].mean()),
         "decision_accuracy_teacher_forced": float(tf_right.mean()),
         "decision_copy_previous": float(copy[decided].mean()),
         "decision_subtask_accuracy": float((tf_right & (tf_w_err <= WAYPOINT_HIT_M)).mean()),
         "free_subtask_accuracy": float((free_pair & (free_w_err <= WAYPOINT_HIT_M))[labelled].mean()),
-        "waypoint_error_mm_free": mm(free_w_err[labelled & free_pair]),
-        "waypoint_error_mm_teacher_forced": mm(tf_w_err),
-        "waypoint_hit_teacher_forced": float((tf_w_err <= WAYPOINT_HIT_M).mean()) if tf_w_err.size else float("nan"),
-        "waypoint_turn_deg_teacher_forced": float(np.median(tf_w_turn)) if tf_w_turn.size else float("nan"),
-        "action_error_mm": mm(a_err[acted]),
+        "waypoint_error_mm_free": _mm(free_w_err[labelled & free_pair]),
+        "action_error_mm": _mm(a_err[acted]),
     }
+
+
+def _mm(x: np.ndarray) -> float:
+    return float(1000 * np.median(x)) if x.size else float("nan")
+
+
+def _pi_m_teacher_forced(policy: Policy, b: dict[str, torch.Tensor], decided: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """π_m's way-points at the labelled decisions ``decided`` of batch ``b`` (in their
+    order), their distance (m) from the labels and their turn (degrees) from them."""
+    at = torch.from_numpy(decided).nonzero(as_tuple=True)
+    tool, target = b["tool"][at].numpy(), b["target"][at].numpy()
+    with torch.no_grad():
+        w = pi_m_waypoint(policy, tool, target, b["candidate_current"][at].numpy()[np.arange(len(target)), target],
+                          b["flags"][at].numpy(), b["came_from"][at].numpy())
+    label = b["waypoint"].numpy()[decided]
+    return w, waypoint_distance(policy, w, label, target), waypoint_turn(policy, w, label, tool, target)
+
+
+def _pi_m_figures(error: np.ndarray, turn: np.ndarray) -> dict[str, float]:
+    return {"waypoint_error_mm_teacher_forced": _mm(error),
+            "waypoint_hit_teacher_forced": float((error <= WAYPOINT_HIT_M).mean()) if error.size else float("nan"),
+            "waypoint_turn_deg_teacher_forced": float(np.median(turn)) if turn.size else float("nan")}
+
+
+def pi_m_figures(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
+    """The teacher-forced π_m figures of :func:`validate` alone, on ``episodes``."""
+    b = batch(episodes, list(range(len(episodes))))
+    decided = (b["labelled"] & b["frame"] & b["decision"]).numpy()
+    decided[:, 0] = False
+    return _pi_m_figures(*_pi_m_teacher_forced(policy, b, decided)[1:])
 
 
 def level_scores(figures: dict[str, float]) -> dict[str, tuple[float, ...]]:
@@ -415,7 +469,10 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
           seed: int, held_out: list[Steps] | None = None, folds: np.ndarray | None = None
           ) -> tuple[Policy, dict[str, float]]:
     """π_h, π_m, π_l fitted to labelled ``episodes``; with ``held_out`` episodes, each
-    level is taken from the checkpoint where it does best on them (:func:`level_scores`). With
+    level is taken from the checkpoint where it does best on them (:func:`level_scores`),
+    π_m also from the best of ``cfg.pi_m_restarts`` initialisations: a mixture fitted from
+    one start can settle with a broad component carrying a decision it never learnt to place
+    (a block put down 5-10 cm from its place). With
     ``folds`` (each object's turns about z that leave it unchanged), π_m learns every
     decision seen from the turns of its target that put the tool's position and heading
     in one sector (:func:`turned`). Returns
@@ -428,21 +485,24 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
                        f"{cfg.batch_steps}, {cfg.checkpoint_every}")
     if not 0.0 <= cfg.dropout < 1.0:
         raise HspError(f"train: dropout must be in [0, 1), got {cfg.dropout}")
+    if cfg.pi_m_restarts < 1:
+        raise HspError(f"train: pi_m_restarts must be ≥ 1, got {cfg.pi_m_restarts}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     net = Hierarchy(Sizes(len(objects), n_classes, cfg.hidden, cfg.memory, cfg.min_fraction, cfg.modes, cfg.dropout))
     policy = Policy(net, Normalisation.fit(episodes), objects, np.asarray(classes), n_classes, cfg.arrive_m,
                     cfg.still_m, cfg.settle_frames, None if folds is None else np.asarray(folds))
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
+    restarts = [_reinitialised(net.intermediate) for _ in range(cfg.pi_m_restarts - 1)] if held_out else []
+    opt = torch.optim.Adam([*net.parameters(), *(p for m in restarts for p in m.parameters())], lr=cfg.learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.iterations)
     lengths = np.array([len(e) for e in episodes])
     report: dict[str, float] = {}
-    best: dict[str, tuple[tuple[float, ...], int, list[dict]]] = {}
+    best: dict[str, tuple[tuple[float, ...], int, list[dict], int]] = {}  # score, iteration, states, restart
     for it in track(range(1, cfg.iterations + 1), description="train π_h, π_m, π_l"):
         order = rng.permutation(len(episodes))
         take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
         b = batch(episodes, list(order[:take]))
-        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds), cfg.axis_m))
+        parts = losses(policy, b if folds is None else turned(b, np.asarray(folds), cfg.axis_m), restarts)
         loss = sum(parts.values())
         opt.zero_grad()
         loss.backward()
@@ -451,21 +511,39 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
         report = {f"loss_{k}": v.item() for k, v in parts.items()} | {"final_loss": loss.item()}
         if held_out and (it % cfg.checkpoint_every == 0 or it == cfg.iterations):
             figures = validate(policy, held_out)
+            others = []
+            for module in restarts:
+                with pi_m_of(net, module):
+                    others.append(figures | pi_m_figures(policy, held_out))
             log.info("iteration %d: held out, π_h's decisions right %.3f (running free, pair %.3f); π_m's way-points "
-                     "%.1f mm, %.1f° off; π_l's steps %.1f mm off", it, figures["decision_accuracy_teacher_forced"],
-                     figures["pair_accuracy_free"], figures["waypoint_error_mm_teacher_forced"],
-                     figures["waypoint_turn_deg_teacher_forced"], figures["action_error_mm"])
-            for level, score in level_scores(figures).items():
+                     "%.1f mm, %.1f° off, right %s; π_l's steps %.1f mm off", it,
+                     figures["decision_accuracy_teacher_forced"], figures["pair_accuracy_free"],
+                     figures["waypoint_error_mm_teacher_forced"], figures["waypoint_turn_deg_teacher_forced"],
+                     " | ".join(f"{f['waypoint_hit_teacher_forced']:.3f}" for f in [figures, *others]),
+                     figures["action_error_mm"])
+            candidates = [(level, score, net.levels()[level], 0) for level, score in level_scores(figures).items()]
+            candidates += [("pi_m", level_scores(f)["pi_m"], [m], r) for r, (f, m) in enumerate(zip(others, restarts), 1)]
+            for level, score, modules, r in candidates:
                 if level not in best or score >= best[level][0]:  # among equals, the later (further trained)
-                    best[level] = (score, it, [copy.deepcopy(m.state_dict()) for m in net.levels()[level]])
+                    best[level] = (score, it, [copy.deepcopy(m.state_dict()) for m in modules], r)
     if best:
-        for level, (_, kept, states) in best.items():
+        for level, (_, kept, states, r) in best.items():
             for module, state in zip(net.levels()[level], states):
                 module.load_state_dict(state)
             report[f"checkpoint_iteration_{level}"] = kept
+        report["checkpoint_restart_pi_m"] = best["pi_m"][3]
         report |= {f"validation_{k}": v for k, v in validate(policy, held_out).items()}
     net.eval()
     return policy, report
+
+
+def _reinitialised(module: nn.Module) -> nn.Module:
+    """A copy of ``module`` with freshly drawn weights."""
+    out = copy.deepcopy(module)
+    for layer in out.modules():
+        if isinstance(layer, nn.Linear):
+            layer.reset_parameters()
+    return out
 
 
 def save(policy: Policy, cfg: TrainConfig, out_dir: Path) -> None:

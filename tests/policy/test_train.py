@@ -185,8 +185,8 @@ def test_each_level_is_kept_from_its_own_best_checkpoint(monkeypatch):
                 "waypoint_turn_deg_teacher_forced": 0.0, "action_error_mm": step}
 
     monkeypatch.setattr(train_module, "validate", fake_validate)
-    _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20),
-                      seed=0, held_out=_data()[:1])
+    _, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=80, batch_steps=40, checkpoint_every=20,
+                                                                pi_m_restarts=1), seed=0, held_out=_data()[:1])
     assert (report["checkpoint_iteration_pi_h"], report["checkpoint_iteration_pi_m"],
             report["checkpoint_iteration_pi_l"]) == (80, 40, 60)
     assert len(returned) == 1
@@ -198,6 +198,49 @@ def test_each_level_is_kept_from_its_own_best_checkpoint(monkeypatch):
     for name, value in returned[0].items():
         assert torch.equal(value, kept[source[level_of[name]]][name]), name
         assert not torch.equal(kept[20][name], kept[80][name]), name  # the checkpoints do differ
+
+
+def test_pi_m_is_kept_from_the_restart_and_checkpoint_that_validate_best(monkeypatch):
+    """π_m's other initialisations compete with the first at every checkpoint: the weights
+    returned are those of the best (restart, checkpoint) on the held-out episodes."""
+    import hsp.policy.train as train_module
+
+    real_validate = train_module.validate
+    first = iter([0.5, 0.6])  # restart 0's way-points right at iterations 20, 40
+    other = iter([0.9, 0.4])  # restart 1's
+    seen: list[dict] = []
+
+    def fake_validate(policy, episodes):
+        return real_validate(policy, episodes) | {"waypoint_hit_teacher_forced": next(first, 0.0)}
+
+    def fake_pi_m_figures(policy, episodes):
+        seen.append({k: v.clone() for k, v in policy.net.intermediate.state_dict().items()})
+        return {"waypoint_hit_teacher_forced": next(other), "waypoint_error_mm_teacher_forced": 1.0,
+                "waypoint_turn_deg_teacher_forced": 1.0}
+
+    monkeypatch.setattr(train_module, "validate", fake_validate)
+    monkeypatch.setattr(train_module, "pi_m_figures", fake_pi_m_figures)
+    policy, report = train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=40, batch_steps=40, checkpoint_every=20,
+                                                                     pi_m_restarts=2), seed=0, held_out=_data()[:1])
+    assert (report["checkpoint_restart_pi_m"], report["checkpoint_iteration_pi_m"]) == (1, 20)
+    assert len(seen) == 2
+    for k, v in policy.net.intermediate.state_dict().items():
+        assert torch.equal(v, seen[0][k]), k
+        assert not torch.equal(seen[0][k], seen[1][k]), k  # the restart did train on
+
+
+def test_the_restarts_loss_trains_only_the_restarts():
+    """L_w of π_m's other initialisations reaches their weights alone: π_h learns from the
+    π_m it runs with."""
+    from hsp.policy.train import _reinitialised
+
+    data = _data()
+    policy = _blank_policy(data)
+    restart = _reinitialised(policy.net.intermediate)
+    assert not torch.equal(restart[0].weight, policy.net.intermediate[0].weight)
+    losses(policy, batch(data, [0, 1]), [restart])["waypoint_restarts"].backward()
+    assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in restart.parameters())
+    assert all(p.grad is None for p in policy.net.parameters())
 
 
 def test_save_and_load_give_the_same_policy(tmp_path):
@@ -249,9 +292,11 @@ def test_a_way_point_is_as_far_from_a_label_as_from_its_nearest_symmetric_equiva
     np.testing.assert_allclose(d, [0.0, 0.05 * np.sqrt(2)], atol=1e-9)
 
 
-def test_a_dropout_outside_0_to_1_is_refused():
+def test_a_dropout_outside_0_to_1_or_no_pi_m_start_is_refused():
     with pytest.raises(HspError, match="dropout"):
         train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=1, batch_steps=40, dropout=1.0), seed=0)
+    with pytest.raises(HspError, match="pi_m_restarts"):
+        train(_data(), OBJECTS, CLASSES, 2, TrainConfig(iterations=1, batch_steps=40, pi_m_restarts=0), seed=0)
 
 
 def test_a_figure_with_nothing_to_judge_scores_worst():
