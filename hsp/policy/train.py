@@ -25,7 +25,8 @@ Terms are means over the frames whose tool and target are tracked (L_action: who
 observed). Batches are whole episodes, drawn until they hold ``batch_steps`` frames, so the
 LSTM reads every history from its start. Every ``checkpoint_every`` iterations the policy
 is validated on the held-out episodes (:func:`validate`, running free among others), and
-each level is kept from the checkpoint where it does best there (:func:`level_scores`).
+each level is kept from the checkpoint where it does best there (:func:`level_scores`);
+π_m is fitted from several initialisations side by side, the best of them kept the same way.
 """
 
 from __future__ import annotations
@@ -246,12 +247,12 @@ def candidate_log_probs(policy: Policy, b: dict[str, torch.Tensor], at: tuple[to
 
 
 @contextmanager
-def pi_m_of(net: Hierarchy, module: nn.Module) -> Iterator[Hierarchy]:
+def pi_m_of(net: Hierarchy, module: nn.Module) -> Iterator[None]:
     """``net`` with ``module`` (shaped as ``net.intermediate``) as its π_m for the duration."""
     kept = net.intermediate
     net.intermediate = module
     try:
-        yield net
+        yield
     finally:
         net.intermediate = kept
 
@@ -527,7 +528,7 @@ def train(episodes: list[Steps], objects: list[str], classes: np.ndarray, n_clas
                 if level not in best or score >= best[level][0]:  # among equals, the later (further trained)
                     best[level] = (score, it, [copy.deepcopy(m.state_dict()) for m in modules], r)
     if best:
-        for level, (_, kept, states, r) in best.items():
+        for level, (_, kept, states, _) in best.items():
             for module, state in zip(net.levels()[level], states):
                 module.load_state_dict(state)
             report[f"checkpoint_iteration_{level}"] = kept
