@@ -290,23 +290,24 @@ def losses(policy: Policy, b: dict[str, torch.Tensor], restarts: Sequence[nn.Mod
     members = b["equivalent"][at]  # (D, n)
     log_target = out["log_target"]
     set_mass = torch.logsumexp(log_target.masked_fill(~members, float("-inf")), -1)
-    joint = torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
+    joint = _set_joint(policy, b, at, log_target, members)
     D = max(len(members), 1)
     out = {"tool": tool_nll.sum() / D, "target": -set_mass.sum() / D, "waypoint": -(joint - set_mass).sum() / D,
            "action": _mean(a_nll, acted), "memory": _mean(drift, same), "retrieval": _mean(ret, has_past)}
     if restarts:
         fixed, fixed_mass = log_target.detach(), set_mass.detach()
-        out["waypoint_restarts"] = sum(_restart_waypoint_loss(policy, b, at, module, fixed, members, fixed_mass)
-                                       for module in restarts) / D
+        extra = torch.zeros(())
+        for module in restarts:
+            with pi_m_of(policy.net, module):
+                extra = extra - (_set_joint(policy, b, at, fixed, members) - fixed_mass).sum()
+        out["waypoint_restarts"] = extra / D
     return out
 
 
-def _restart_waypoint_loss(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...], module: nn.Module,
-                           log_target: torch.Tensor, members: torch.Tensor, set_mass: torch.Tensor) -> torch.Tensor:
-    """Σ L_w of π_m ``module`` over the decisions ``at`` (:func:`losses`)."""
-    with pi_m_of(policy.net, module):
-        joint = torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
-    return -(joint - set_mass).sum()
+def _set_joint(policy: Policy, b: dict[str, torch.Tensor], at: tuple[torch.Tensor, ...], log_target: torch.Tensor,
+               members: torch.Tensor) -> torch.Tensor:
+    """log Σ_{j∈S} π(j | o+) π_m(p_k[o+, j] | j) at the decisions ``at`` ``(D,)``."""
+    return torch.logsumexp((log_target + candidate_log_probs(policy, b, at)).masked_fill(~members, float("-inf")), -1)
 
 
 def split(n_episodes: int, every: int) -> tuple[list[int], list[int]]:

@@ -229,6 +229,17 @@ def test_pi_m_is_kept_from_the_restart_and_checkpoint_that_validate_best(monkeyp
         assert not torch.equal(seen[0][k], seen[1][k]), k  # the restart did train on
 
 
+def test_pi_m_alone_is_judged_as_validate_judges_it():
+    from hsp.policy.train import pi_m_figures
+
+    data = _data()
+    policy, _ = train(data, OBJECTS, CLASSES, 2, TrainConfig(iterations=20, batch_steps=40), seed=0)
+    full = validate(policy, data)
+    assert pi_m_figures(policy, data) == {k: full[k] for k in ("waypoint_error_mm_teacher_forced",
+                                                               "waypoint_hit_teacher_forced",
+                                                               "waypoint_turn_deg_teacher_forced")}
+
+
 def test_the_restarts_loss_trains_only_the_restarts():
     """L_w of π_m's other initialisations reaches their weights alone: π_h learns from the
     π_m it runs with."""
