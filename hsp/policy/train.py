@@ -388,7 +388,7 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     b = batch(episodes, list(range(len(episodes))))
     first = np.zeros(b["frame"].shape, bool)
     first[:, 0] = True
-    decided = (b["labelled"] & b["frame"] & b["decision"]).numpy() & ~first
+    decided = _judged_decisions(b)
     at = torch.from_numpy(decided).nonzero(as_tuple=True)
     with torch.no_grad():
         out = forward(policy, b, at)
@@ -422,6 +422,13 @@ def _validate(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     }
 
 
+def _judged_decisions(b: dict[str, torch.Tensor]) -> np.ndarray:
+    """The labelled decisions of batch ``b`` that validation judges: all but each episode's first."""
+    decided = (b["labelled"] & b["frame"] & b["decision"]).numpy()
+    decided[:, 0] = False
+    return decided
+
+
 def _mm(x: np.ndarray) -> float:
     return float(1000 * np.median(x)) if x.size else float("nan")
 
@@ -448,9 +455,7 @@ def _pi_m_figures(error: np.ndarray, turn: np.ndarray) -> dict[str, float]:
 def pi_m_figures(policy: Policy, episodes: list[Steps]) -> dict[str, float]:
     """The teacher-forced π_m figures of :func:`validate` alone, on ``episodes``."""
     b = batch(episodes, list(range(len(episodes))))
-    decided = (b["labelled"] & b["frame"] & b["decision"]).numpy()
-    decided[:, 0] = False
-    return _pi_m_figures(*_pi_m_teacher_forced(policy, b, decided)[1:])
+    return _pi_m_figures(*_pi_m_teacher_forced(policy, b, _judged_decisions(b))[1:])
 
 
 def level_scores(figures: dict[str, float]) -> dict[str, tuple[float, ...]]:
