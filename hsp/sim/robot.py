@@ -1,8 +1,9 @@
 """The Kuka iiwa from ``pybullet_data`` with a tool welded to its flange.
 
 The tool (the gripper-shaped hand for pick-and-place, the socket wrench for tire removal)
-is a separate body held by a stiff fixed constraint; its frame is the tool-centre point,
-which is also the end-effector object (index 0) of the task. Cartesian commands go
+is a separate body held by a stiff fixed constraint, put back on its mount after every
+physics step (:meth:`KukaArm.reseat`); its frame is the tool-centre point, which is also
+the end-effector object (index 0) of the task. Cartesian commands go
 through :class:`~hsp.sim.ik.KukaIK` and joint position control.
 """
 
@@ -78,6 +79,27 @@ class KukaArm:
             forces=[self.max_force] * 7, positionGains=[0.3] * 7, velocityGains=[1.0] * 7,
             physicsClientId=self.client,
         )
+
+    def reseat(self) -> None:
+        """Put the tool back where its mount on the flange holds it, moving as the flange
+        does, and what it holds (a body) with it, after each physics step. Loaded (a brush
+        held), PyBullet's fixed constraint between the arm (a multibody) and the tool body
+        keeps the position but lets the tool turn on the flange while the arm turns, and
+        never takes it back: 2.4° as a policy turned a brush tip-down (its tip 3.5 cm off
+        the paint), 49° when commanded an 80° turn at once. Bolting the tool into the arm's
+        multibody by a fixed joint moves the same drift to the grasp (a held brush slid 3
+        cm)."""
+        s = p.getLinkState(self.robot, EE_LINK, computeLinkVelocity=True, computeForwardKinematics=True,
+                           physicsClientId=self.client)
+        tcp = compose(np.array([*s[4], *s[5]]), self.T_flange_tcp)
+        omega, com = np.array(s[7]), np.array(s[0])
+        fix = compose(tcp, inverse(body_pose(self.client, self.body)))  # world-frame correction
+        bodies = [self.body] + ([self.gripper.held[0]] if self.gripper.held and self.gripper.held[1] < 0 else [])
+        for b in bodies:
+            pose = compose(fix, body_pose(self.client, b))
+            v = np.array(s[6]) + np.cross(omega, pose[:3] - com)  # the flange's rigid motion at the body
+            p.resetBasePositionAndOrientation(b, pose[:3].tolist(), pose[3:].tolist(), physicsClientId=self.client)
+            p.resetBaseVelocity(b, v.tolist(), omega.tolist(), physicsClientId=self.client)
 
     def reach_error(self, T_world_tcps: list[np.ndarray]) -> float:
         """Worst :meth:`~hsp.sim.ik.KukaIK.pose_error` of the flange on the way from the

@@ -99,6 +99,8 @@ class Scene:
         if self.coupling is not None:
             self.coupling.update()
         p.stepSimulation(physicsClientId=self.client)
+        if isinstance(self.ee, KukaArm):
+            self.ee.reseat()
 
     def grasp(self, i: int) -> None:
         self.ee.gripper.grasp(self.bodies[i], self.links[i])
