@@ -203,7 +203,7 @@ def label(
 def train(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
     method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels) | supervised (on the "
-                               "demonstrator's annotation: the upper bound)"),
+                               "demonstrator's annotation: the upper bound) | a baseline: bc | bc-rnn"),
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     labels: Optional[Path] = typer.Option(None, help="pseudo-labels, for proposed [data/labels/TASK.parquet]"),
     recordings: Optional[Path] = typer.Option(None, help="recordings with the annotation, for supervised [data/recordings/TASK]"),
@@ -212,25 +212,32 @@ def train(
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
-    """Train π_h, π_m and π_l on the pose dataset and its pseudo-labels (or the annotation)."""
+    """Train π_h, π_m and π_l on the pose dataset and its pseudo-labels (or the annotation),
+    or a baseline on the pose dataset."""
     import dataclasses
 
+    from hsp.baselines import config_class, train_baseline
     from hsp.policy.stage import train_task
     from hsp.policy.train import TrainConfig
     from hsp.tasks.registry import load_task
 
     try:
-        if method not in ("proposed", "supervised"):
-            raise HspError(f"--method {method}: only 'proposed' and 'supervised' are built yet (the baselines are not)")
         params = load_params(params_file)
-        cfg = section(params, "train", TrainConfig)
+        hierarchy = method in ("proposed", "supervised")
+        cfg = section(params, "train", TrainConfig) if hierarchy else section(params, f"baselines.{method}",
+                                                                               config_class(method))
         if iterations is not None:
             cfg = dataclasses.replace(cfg, iterations=iterations)
         t = load_task(task)
+        ds = dataset or Path("data/datasets") / task
         out_dir = out or Path("data/models") / task / method
-        source = ({"labels_file": labels or Path("data/labels") / f"{task}.parquet"} if method == "proposed"
-                  else {"recordings_dir": recordings or Path("data/recordings") / task})
-        report = train_task(t, dataset or Path("data/datasets") / task, out_dir, cfg, int(param(params, "seed", 0)), **source)
+        seed = int(param(params, "seed", 0))
+        if hierarchy:
+            source = ({"labels_file": labels or Path("data/labels") / f"{task}.parquet"} if method == "proposed"
+                      else {"recordings_dir": recordings or Path("data/recordings") / task})
+            report = train_task(t, ds, out_dir, cfg, seed, **source)
+        else:
+            report = train_baseline(t, method, ds, out_dir, cfg, seed)
         _write_report(reports / task / method / "train.json", report, out_dir)
     except HspError as e:
         _fail(e)
@@ -239,7 +246,7 @@ def train(
 @app.command(name="eval")
 def evaluate(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
-    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised"),
+    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised | bc | bc-rnn"),
     observer: str = typer.Option("sim", help="sim (the simulator's poses) | camera (rendered RGB-D, tracked online)"),
     episodes: Optional[int] = typer.Option(None, help="episodes per run [params: eval.episodes]"),
     runs: Optional[int] = typer.Option(None, help="runs, each on its own held-out layouts [params: eval.runs]"),

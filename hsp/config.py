@@ -42,8 +42,9 @@ def param(params: dict[str, Any], key: str, default: Any) -> Any:
 
 
 def section(params: dict[str, Any], name: str, cls: type[C], ignore: tuple[str, ...] = ()) -> C:
-    """A config dataclass from the ``name`` section; unknown keys are an error naming them."""
-    return _build(params.get(name) or {}, name, cls, ignore)
+    """A config dataclass from the ``name`` section (dotted: ``baselines.bc``); unknown keys
+    are an error naming them."""
+    return _build(param(params, name, None) or {}, name, cls, ignore)
 
 
 def _build(values: dict[str, Any], where: str, cls: type[C], ignore: tuple[str, ...] = ()) -> C:

@@ -28,6 +28,8 @@ from hsp.tasks.success import progress
 
 SETTLE_S = 0.25
 """Physics time after a reset, the arm holding its pose, before the first observation."""
+GRIP_CLOSED = -1
+"""Grip command of a policy that knows no objects (a gripper closing on what it touches)."""
 
 
 @dataclass(frozen=True)
@@ -70,8 +72,9 @@ class HspEnv(gym.Env):
     """One task on the Kuka, seen through an observer (default: the simulator's poses;
     :mod:`~hsp.evaluation.observers`). Action ``(8,)``: the tool-centre point's world pose
     ``[x, y, z, qx, qy, qz, qw]`` at the end of the step, then the object to hold (0: none;
-    ``i``: close on object ``i`` once it is within grasp reach; it is let go when the command
-    returns to 0). The arm moves there along a straight line and a slerp over the step."""
+    ``i``: close on object ``i`` once it is within grasp reach; :data:`GRIP_CLOSED`: close
+    on the nearest object within grasp reach, as a plain gripper does; it is let go when the
+    command returns to 0). The arm moves there along a straight line and a slerp over the step."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
@@ -85,7 +88,7 @@ class HspEnv(gym.Env):
             "agent_pos": gym.spaces.Box(-np.inf, np.inf, (7,), np.float32),
             "environment_state": gym.spaces.Box(-np.inf, np.inf, (7 * (n - 1),), np.float32),
         })
-        low = np.array([-2, -2, -1, -1, -1, -1, -1, 0], np.float32)
+        low = np.array([-2, -2, -1, -1, -1, -1, -1, GRIP_CLOSED], np.float32)
         high = np.array([2, 2, 2, 1, 1, 1, 1, n - 1], np.float32)
         self.action_space = gym.spaces.Box(low, high, dtype=np.float32)
         self._boxes = [(v.min(0), v.max(0)) for v in (obj_vertices(task.mesh(i)) for i in range(n))]
@@ -151,12 +154,19 @@ class HspEnv(gym.Env):
             raise RuntimeError("call reset() before reach_error()")
         return self.scene.ee.reach_error(T_world_tcp)  # type: ignore[union-attr]
 
+    def box_distances(self) -> np.ndarray:
+        """Distance (m) from the tool-centre point to each object's box ``(n,)`` (object 0: inf)."""
+        poses = self.poses[-1]
+        out = np.full(len(poses), np.inf)
+        for i in range(1, len(poses)):
+            local = transform_points(inverse(poses[i]), poses[0, :3])
+            lo, hi = self._boxes[i]
+            out[i] = np.linalg.norm(np.maximum(lo - local, 0) + np.maximum(local - hi, 0))
+        return out
+
     def within_reach(self, i: int) -> bool:
         """Whether the tool-centre point is within grasp reach of object ``i``'s box."""
-        poses = self.poses[-1]
-        local = transform_points(inverse(poses[i]), poses[0, :3])
-        lo, hi = self._boxes[i]
-        return bool(np.linalg.norm(np.maximum(lo - local, 0) + np.maximum(local - hi, 0)) <= self.config.grasp_reach_m)
+        return bool(self.box_distances()[i] <= self.config.grasp_reach_m)
 
     def _limited(self, goal: np.ndarray) -> np.ndarray:
         """``goal (7,)`` moved back toward the last command to respect the speed limits."""
@@ -172,8 +182,11 @@ class HspEnv(gym.Env):
 
     def _grip(self, obj: int) -> None:
         n = len(self.task.objects)
-        if not 0 <= obj < n:
-            raise HspError(f"grip command {obj}: not an object index of task {self.task.name!r} (0–{n - 1})")
+        if not GRIP_CLOSED <= obj < n:
+            raise HspError(f"grip command {obj}: not an object index of task {self.task.name!r} (0–{n - 1}) "
+                           f"nor {GRIP_CLOSED} (close on the nearest)")
+        if obj == GRIP_CLOSED:
+            obj = self.held or int(np.argmin(self.box_distances()))
         if obj == self.held:
             return
         if self.held:

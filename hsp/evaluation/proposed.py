@@ -28,10 +28,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from hsp.errors import HspError
-from hsp.geometry import compose, relative
+from hsp.geometry import apply_rotvec_delta, compose, relative
 from hsp.geometry.symmetry import z_folds
 from hsp.labeling.label import canonical_poses
 from hsp.policy.features import ARM_M, turned_about_z
@@ -39,13 +38,6 @@ from hsp.policy.stepper import Stepper
 from hsp.policy.train import Policy
 from hsp.sim.demonstrators.common import reachable_yaw
 from hsp.tasks.registry import Task
-
-
-def apply_step(current: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """The pose ``(7,)`` reached from ``current (7,)`` by an action ``(6,)`` of
-    :func:`~hsp.geometry.rotvec_delta` (translation added, rotation vector left-multiplied)."""
-    q = (Rotation.from_rotvec(step[3:]) * Rotation.from_quat(current[3:])).as_quat()
-    return np.concatenate([current[:3] + step[:3], q])
 
 
 def tcp_command(poses: np.ndarray, canonical: np.ndarray, tool: int, target: int, step: np.ndarray) -> np.ndarray:
@@ -56,7 +48,7 @@ def tcp_command(poses: np.ndarray, canonical: np.ndarray, tool: int, target: int
     not turn to a look-alike orientation."""
     rel = relative(canonical[tool], canonical[target])
     offset = relative(poses[tool], canonical[tool])
-    tool_next = compose(compose(canonical[target], apply_step(rel, step)), offset)
+    tool_next = compose(compose(canonical[target], apply_rotvec_delta(rel, step)), offset)
     return tool_next if tool == 0 else compose(tool_next, relative(poses[0], poses[tool]))
 
 

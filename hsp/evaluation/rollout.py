@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 from rich.progress import Progress
 
+from hsp.baselines import METHODS as BASELINES
+from hsp.baselines import PLANNED, check_method, load_agent
 from hsp.errors import HspError
 from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
 from hsp.evaluation.observers import CameraObserver, Observer, SimObserver
@@ -29,7 +31,8 @@ from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
 
-METHODS = ("oracle", "proposed", "supervised")
+HIERARCHY = ("proposed", "supervised")
+METHODS = ("oracle", *HIERARCHY, *BASELINES)
 OBSERVERS = ("sim", "camera")
 EVAL_STREAM = 1
 """Third entropy word of the evaluation seeds, apart from the recordings' two-word ones."""
@@ -92,9 +95,9 @@ def make_agent(task: Task, method: str, model_dir: Path | None, env: HspEnv):
         from hsp.evaluation.oracle import Oracle
 
         return Oracle(task, env.config.fps, env.reach_error)
-    if method in ("proposed", "supervised"):
+    if method in HIERARCHY:
         return load_runner(task, method, model_dir, env.reach_error)
-    raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
+    return load_agent(task, method, model_dir, env.config.fps)
 
 
 def run_episode(env: HspEnv, agent, seed: int, video: Path | None = None) -> dict:
@@ -151,11 +154,15 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
              out_dir: Path) -> dict[str, float | int | str]:
     """Run ``cfg.runs × cfg.episodes`` episodes; write ``eval.json``, ``episodes.jsonl`` and
     ``videos/`` into ``out_dir`` (suffixed ``_camera`` for that observer), all or nothing."""
+    if method in PLANNED:
+        check_method(method)
     if method not in METHODS:
         raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
     make_observer(task, observer, cfg)  # bad input fails here, before any episode
-    if method != "oracle":
+    if method in HIERARCHY:
         load_runner(task, method, model_dir)
+    elif method != "oracle":
+        load_agent(task, method, model_dir, cfg.env.fps)
     suffix = "" if observer == "sim" else f"_{observer}"
     seeds = held_out_seeds(cfg.seed, cfg.runs, cfg.episodes, cfg.recorded_episodes)
     out_dir = Path(out_dir)

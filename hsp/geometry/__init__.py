@@ -5,6 +5,7 @@ All conversions between poses, matrices, rotation vectors and yaw angles live he
 
 from hsp.geometry.poses import (
     IDENTITY_POSE,
+    apply_rotvec_delta,
     compose,
     inverse,
     normalize_quat,
@@ -20,6 +21,7 @@ from hsp.geometry.poses import (
 
 __all__ = [
     "IDENTITY_POSE",
+    "apply_rotvec_delta",
     "compose",
     "inverse",
     "normalize_quat",

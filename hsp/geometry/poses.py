@@ -103,6 +103,16 @@ def rotvec_delta(T_from: np.ndarray, T_to: np.ndarray) -> np.ndarray:
     return np.concatenate([b[:, :3] - a[:, :3], rv], axis=-1).reshape(shape + (6,))
 
 
+def apply_rotvec_delta(T: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`rotvec_delta`: the pose ``(..., 7)`` reached from ``T (..., 7)``
+    by ``delta (..., 6)`` (translation added, rotation vector left-multiplied, world frame)."""
+    a, d = np.asarray(T, float), np.asarray(delta, float)
+    shape = np.broadcast_shapes(a.shape[:-1], d.shape[:-1])
+    a, d = np.broadcast_to(a, shape + (7,)).reshape(-1, 7), np.array(np.broadcast_to(d, shape + (6,))).reshape(-1, 6)
+    q = (Rotation.from_rotvec(d[:, 3:]) * _rot(a[:, 3:])).as_quat()
+    return np.concatenate([a[:, :3] + d[:, :3], q], axis=-1).reshape(shape + (7,))
+
+
 def rotation_angle_deg(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     """Geodesic angle between two rotations (degrees); ``q`` and ``-q`` agree."""
     qa = normalize_quat(q_a)

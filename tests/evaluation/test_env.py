@@ -9,7 +9,7 @@ import hsp.evaluation  # noqa: F401  (registers hsp/<Task>-v0)
 from hsp.dataset.features import ENV_STATE, STATE, features
 from hsp.errors import HspError
 from hsp.evaluation import env_id
-from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
+from hsp.evaluation.env import GRIP_CLOSED, EnvConfig, HspEnv, world_poses
 from hsp.evaluation.oracle import Oracle
 from hsp.evaluation.rollout import run_episode
 from tests.conftest import TASKS
@@ -64,6 +64,27 @@ def test_the_gripper_closes_only_within_reach(tasks):
         env.step(np.concatenate([above, [7.0]]))
     with pytest.raises(HspError, match="8 finite numbers"):
         env.step(np.full(8, np.nan))
+    env.close()
+
+
+def test_a_plain_gripper_closes_on_the_nearest_object_within_reach(tasks):
+    """GRIP_CLOSED (a policy that knows no objects): nothing far from the hand, then the block
+    the hand is on, held while the command stays closed and let go when it opens."""
+    env = HspEnv(tasks["stacking-1"], EnvConfig(max_steps=20))
+    poses = world_poses(env.reset(seed=0)[0])
+    env.step(np.concatenate([poses[0], [GRIP_CLOSED]]))
+    assert env.held == 0
+    target = int(np.argmin(np.linalg.norm(poses[1:, :2] - poses[0, :2], axis=1))) + 1
+    env.step(np.concatenate([poses[target], [0.0]]))
+    for _ in range(8):
+        obs, *_ = env.step(np.concatenate([poses[target], [GRIP_CLOSED]]))
+    assert env.held == target
+    lifted = world_poses(obs)[0] + np.r_[0, 0, 0.05, 0, 0, 0, 0]
+    for _ in range(3):
+        obs, *_ = env.step(np.concatenate([lifted, [GRIP_CLOSED]]))
+    assert env.held == target and world_poses(obs)[target, 2] > poses[target, 2] + 0.03
+    env.step(np.concatenate([lifted, [0.0]]))
+    assert env.held == 0
     env.close()
 
 

@@ -4,6 +4,7 @@ from scipy.spatial.transform import Rotation
 
 from hsp.geometry import (
     IDENTITY_POSE,
+    apply_rotvec_delta,
     compose,
     inverse,
     pose_from_matrix,
@@ -77,6 +78,17 @@ def test_rotvec_delta_of_known_motion():
     a = np.array([0, 0, 0, 0, 0, 0, 1.0])
     b = np.concatenate([[0.1, -0.2, 0.3], Rotation.from_rotvec([0, 0, 0.5]).as_quat()])
     np.testing.assert_allclose(rotvec_delta(a, b), [0.1, -0.2, 0.3, 0, 0, 0.5], atol=1e-12)
+
+
+def test_apply_rotvec_delta_inverts_rotvec_delta_batched():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(2, 5, 7))
+    a[:, 3:] /= np.linalg.norm(a[:, 3:], axis=1, keepdims=True)
+    b[:, 3:] /= np.linalg.norm(b[:, 3:], axis=1, keepdims=True)
+    got = apply_rotvec_delta(a, rotvec_delta(a, b))
+    np.testing.assert_allclose(got[:, :3], b[:, :3], atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(got[:, 3:] * b[:, 3:], axis=1)), 1.0, atol=1e-9)
+    np.testing.assert_allclose(apply_rotvec_delta(a[0], rotvec_delta(a[0], b[0])), got[0], atol=1e-12)
 
 
 def test_yaw_and_slerp():

@@ -1,0 +1,79 @@
+"""What the low-level baselines see and do, from the same pose datasets as the hierarchy.
+
+* o_t, the flat observation: every object's world pose, e_t first (the dataset's
+  ``observation.state`` then ``observation.environment_state``), each as its position and
+  the first two columns of its rotation matrix (continuous, where a quaternion jumps
+  between q and −q), symmetric objects' orientations made canonical as the hierarchy sees
+  them (:func:`~hsp.labeling.label.canonical_poses`); ``(9n,)``.
+* a_t, the dataset's ``action``: e_t's change to the next frame (world translation and
+  rotation vector, :func:`~hsp.dataset.writer.actions`); ``(6,)``.
+* g_t, the gripper: closed while an object moves with the end-effector, by the same motion
+  evidence the labeller reads (:func:`~hsp.labeling.priors.tool_evidence`). A hand
+  demonstration has no gripper signal; this is the one a robot would have needed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hsp.dataset.features import TrackStatus
+from hsp.dataset.reader import load_episodes
+from hsp.dataset.writer import actions
+from hsp.errors import HspError
+from hsp.labeling.label import canonical_poses
+from hsp.labeling.priors import tool_evidence
+from hsp.tasks.registry import Task
+
+POSE_FEATURES = 9
+"""Per object: position (3) and two columns of the rotation matrix (6)."""
+
+
+def flat_observation(world: np.ndarray) -> np.ndarray:
+    """o_t ``(..., 9n)`` from world poses ``(..., n, 7)`` (orientations already canonical)."""
+    R = Rotation.from_quat(world[..., 3:].reshape(-1, 4)).as_matrix()[:, :, :2]
+    per_object = np.concatenate([world[..., :3], R.reshape(world.shape[:-1] + (6,))], axis=-1)
+    return per_object.reshape(world.shape[:-2] + (-1,))
+
+
+@dataclass
+class Demonstrations:
+    """Per episode: o_t ``(H, 9n)``, a_t ``(H, 6)``, g_t ``(H,)`` and whether a_t was
+    observed (e_t tracked at t and t + 1) ``(H,)``."""
+
+    obs: list[np.ndarray]
+    action: list[np.ndarray]
+    grip: list[np.ndarray]
+    observed: list[np.ndarray]
+    fps: int
+
+    def __len__(self) -> int:
+        return len(self.obs)
+
+    def subset(self, idx: list[int]) -> "Demonstrations":
+        return Demonstrations(*([getattr(self, k)[i] for i in idx] for k in ("obs", "action", "grip", "observed")),
+                              fps=self.fps)
+
+
+def episode_arrays(world: np.ndarray, status: np.ndarray, symmetries: list[str], moving_m: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """o_t, a_t, g_t and a_t observed of one episode of world poses ``(H, n, 7)`` and tracking
+    status ``(H, n)``."""
+    ok = status != TrackStatus.LOST
+    observed = np.zeros(len(world), bool)
+    observed[:-1] = ok[:-1, 0] & ok[1:, 0]
+    grip = tool_evidence(world, ok, moving_m) > 0
+    return (flat_observation(canonical_poses(world, symmetries)), actions(world[:, 0], status[:, 0]), grip, observed)
+
+
+def load_demonstrations(task: Task, dataset_dir: Path, moving_m: float) -> Demonstrations:
+    """Every episode of a pose dataset of ``task`` as :class:`Demonstrations`."""
+    poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
+    if not poses:
+        raise HspError(f"{dataset_dir}: the dataset holds no episodes")
+    symmetries = [o.symmetry for o in task.objects]
+    parts = [episode_arrays(w, s, symmetries, moving_m) for w, s in zip(poses, status)]
+    return Demonstrations(*(list(x) for x in zip(*parts)), fps=int(meta["fps"]))

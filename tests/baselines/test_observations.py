@@ -1,0 +1,39 @@
+"""The baselines' observation, action and gripper from pose trajectories."""
+
+import numpy as np
+
+from hsp.baselines.observations import episode_arrays, flat_observation
+from hsp.dataset.features import TrackStatus
+
+
+def carry_episode() -> np.ndarray:
+    """World poses ``(30, 3, 7)``: the hand moves 1 cm a frame along x, alone for 10 frames,
+    carrying block 1 for the next 10 (from frame 10), alone again for the last 10."""
+    H = 30
+    world = np.zeros((H, 3, 7))
+    world[..., 6] = 1.0
+    world[:, 0, 0] = 0.01 * np.arange(H)
+    world[:, 0, 2] = 0.1
+    world[:, 1, 0] = np.clip(world[:, 0, 0], 0.10, 0.20)
+    world[:, 2, :2] = [0.5, 0.5]
+    return world
+
+
+def test_observation_is_positions_and_two_rotation_columns_whatever_the_quaternion_sign():
+    world = carry_episode()
+    flipped = world.copy()
+    flipped[:, 1, 3:] *= -1
+    obs = flat_observation(world)
+    assert obs.shape == (30, 27)
+    np.testing.assert_array_equal(obs, flat_observation(flipped))
+    np.testing.assert_allclose(obs[5, :9], [0.05, 0, 0.1, 1, 0, 0, 1, 0, 0])
+
+
+def test_gripper_closes_while_an_object_moves_with_the_hand_and_lost_steps_are_not_observed():
+    world = carry_episode()
+    status = np.zeros((30, 3), np.int64)
+    status[25, 0] = TrackStatus.LOST
+    obs, action, grip, observed = episode_arrays(world, status, ["none", "none", "none"], moving_m=0.002)
+    assert not grip[:8].any() and grip[11:19].all() and not grip[23:].any()
+    np.testing.assert_allclose(action[3], [0.01, 0, 0, 0, 0, 0], atol=1e-12)
+    assert list(np.flatnonzero(~observed)) == [24, 25, 29]
