@@ -203,10 +203,11 @@ def label(
 def train(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
     method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels) | supervised (on the "
-                               "demonstrator's annotation: the upper bound) | a baseline: bc | bc-rnn"),
+                               "demonstrator's annotation: the upper bound) | a baseline: bc | bc-rnn | taco"),
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     labels: Optional[Path] = typer.Option(None, help="pseudo-labels, for proposed [data/labels/TASK.parquet]"),
-    recordings: Optional[Path] = typer.Option(None, help="recordings with the annotation, for supervised [data/recordings/TASK]"),
+    recordings: Optional[Path] = typer.Option(None, help="recordings with the annotation, for supervised and taco's sketches "
+                                              "[data/recordings/TASK]"),
     out: Optional[Path] = typer.Option(None, help="model directory [data/models/TASK/METHOD]"),
     iterations: Optional[int] = typer.Option(None, help="gradient steps [params: train.iterations]"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
@@ -237,7 +238,7 @@ def train(
                       else {"recordings_dir": recordings or Path("data/recordings") / task})
             report = train_task(t, ds, out_dir, cfg, seed, **source)
         else:
-            report = train_baseline(t, method, ds, out_dir, cfg, seed)
+            report = train_baseline(t, method, ds, out_dir, cfg, seed, recordings or Path("data/recordings") / task)
         _write_report(reports / task / method / "train.json", report, out_dir)
     except HspError as e:
         _fail(e)
@@ -246,7 +247,7 @@ def train(
 @app.command(name="eval")
 def evaluate(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
-    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised | bc | bc-rnn"),
+    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised | bc | bc-rnn | taco"),
     observer: str = typer.Option("sim", help="sim (the simulator's poses) | camera (rendered RGB-D, tracked online)"),
     episodes: Optional[int] = typer.Option(None, help="episodes per run [params: eval.episodes]"),
     runs: Optional[int] = typer.Option(None, help="runs, each on its own held-out layouts [params: eval.runs]"),

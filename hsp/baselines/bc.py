@@ -77,9 +77,9 @@ class BCConfig:
 class GaussianPolicy(nn.Module):
     """o_≤t → mean of a_t (standardised), its log-spread (learnt, the same in every state:
     a spread read from the state shrinks on the training frames and blows the held-out
-    likelihood up) and the gripper's logit."""
+    likelihood up) and logits: the gripper's, then any a method adds (TACO's stop)."""
 
-    def __init__(self, d_obs: int, hidden: int, layers: int, recurrent: bool) -> None:
+    def __init__(self, d_obs: int, hidden: int, layers: int, recurrent: bool, logits: int = 1) -> None:
         super().__init__()
         self.recurrent = recurrent
         self.lstm = nn.LSTM(d_obs, hidden, batch_first=True) if recurrent else None
@@ -88,19 +88,20 @@ class GaussianPolicy(nn.Module):
             body += [nn.Linear(d, hidden), nn.ReLU()]
             d = hidden
         self.body = nn.Sequential(*body)
-        self.head = nn.Linear(hidden, 7)
+        self.head = nn.Linear(hidden, 6 + logits)
         self.log_std = nn.Parameter(torch.zeros(6))
         for name in ("obs_mean", "obs_std", "act_mean", "act_std"):
             self.register_buffer(name, torch.zeros(6 if name.startswith("act") else d_obs))
 
     def forward(self, obs: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, tuple[torch.Tensor, torch.Tensor] | None]:
-        """``obs (B, T, d)`` raw → mean, log-std ``(B, T, 6)``, gripper logit ``(B, T)``, LSTM state."""
+        """``obs (B, T, d)`` raw → mean, log-std ``(B, T, 6)``, logits ``(B, T, logits)`` (the
+        gripper's first), LSTM state."""
         x = (obs - self.obs_mean) / self.obs_std
         if self.lstm is not None:
             x, state = self.lstm(x, state)
         out = self.head(self.body(x))
-        return out[..., :6], self.log_std.clamp(*LOG_STD_RANGE).expand_as(out[..., :6]), out[..., 6], state
+        return out[..., :6], self.log_std.clamp(*LOG_STD_RANGE).expand_as(out[..., :6]), out[..., 6:], state
 
 
 @dataclass
@@ -111,7 +112,7 @@ class BCModel:
     fps: int
 
 
-def _batch(demos: Demonstrations, idx: list[int]) -> dict[str, torch.Tensor]:
+def episode_batch(demos: Demonstrations, idx: list[int]) -> dict[str, torch.Tensor]:
     """Episodes ``idx`` padded to the longest: obs, action, grip, observed, present ``(B, T, ...)``."""
     T = max(len(demos.obs[i]) for i in idx)
 
@@ -129,16 +130,22 @@ def _frames(b: dict[str, torch.Tensor], rows: np.ndarray) -> dict[str, torch.Ten
     return {k: v.reshape((-1,) + v.shape[2:])[torch.from_numpy(rows)][:, None] for k, v in b.items()}
 
 
-def losses(net: GaussianPolicy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """−log π(a_t) over frames whose step was observed (standardised units, constant
-    dropped) and −log π(g_t) over every frame."""
-    mean, log_std, grip_logit, _ = net(b["obs"])
+def frame_nll(net: GaussianPolicy, b: dict[str, torch.Tensor], mean: torch.Tensor, log_std: torch.Tensor,
+              logits: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per frame ``(B, T)``: −log π(a_t) where the step was observed (0 elsewhere;
+    standardised units, constant dropped) and −log π(g_t)."""
     a = (b["action"] - net.act_mean) / net.act_std
-    nll = (0.5 * ((a - mean) / log_std.exp()) ** 2 + log_std).sum(-1)
+    nll = (0.5 * ((a - mean) / log_std.exp()) ** 2 + log_std).sum(-1) * b["observed"]
+    bce = nn.functional.binary_cross_entropy_with_logits(logits[..., 0], b["grip"].float(), reduction="none")
+    return nll, bce
+
+
+def losses(net: GaussianPolicy, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """−log π(a_t) over frames whose step was observed and −log π(g_t) over every frame."""
+    mean, log_std, logits, _ = net(b["obs"])
+    nll, bce = frame_nll(net, b, mean, log_std, logits)
     observed, present = b["observed"], b["present"]
-    bce = nn.functional.binary_cross_entropy_with_logits(grip_logit, b["grip"].float(), reduction="none")
-    return {"action": (nll * observed).sum() / observed.sum().clamp(min=1),
-            "grip": (bce * present).sum() / present.sum().clamp(min=1)}
+    return {"action": nll.sum() / observed.sum().clamp(min=1), "grip": (bce * present).sum() / present.sum().clamp(min=1)}
 
 
 def standardise(net: GaussianPolicy, demos: Demonstrations) -> None:
@@ -154,14 +161,14 @@ def validate(net: GaussianPolicy, demos: Demonstrations) -> dict[str, float]:
     """Held-out figures: the loss terms, the mean action's error (mm, and degrees of turn) on
     observed steps, and how often the gripper is right."""
     net.eval()
-    b = _batch(demos, list(range(len(demos))))
+    b = episode_batch(demos, list(range(len(demos))))
     parts = losses(net, b)
-    mean, _, grip_logit, _ = net(b["obs"])
+    mean, _, logits, _ = net(b["obs"])
     pred = mean * net.act_std + net.act_mean
     observed, present = b["observed"], b["present"]
     err_mm = 1000 * (pred[..., :3] - b["action"][..., :3]).norm(dim=-1)
     err_deg = torch.rad2deg((pred[..., 3:] - b["action"][..., 3:]).norm(dim=-1))
-    grip_right = ((grip_logit > 0) == b["grip"]).float()
+    grip_right = ((logits[..., 0] > 0) == b["grip"]).float()
     net.train()
     return {"nll_action": parts["action"].item(), "nll_grip": parts["grip"].item(),
             "action_error_mm": (err_mm[observed].mean()).item(), "action_error_deg": (err_deg[observed].mean()).item(),
@@ -180,7 +187,7 @@ def train(demos: Demonstrations, objects: list[str], method: str, cfg: BCConfig,
     standardise(net, train_set)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     lengths = np.array([len(o) for o in train_set.obs])
-    whole = _batch(train_set, list(range(len(train_set))))
+    whole = episode_batch(train_set, list(range(len(train_set))))
     frames = np.flatnonzero(whole["present"].reshape(-1).numpy())
     best: tuple[float, int, dict] | None = None
     report: dict[str, float | int] = {}
@@ -190,7 +197,7 @@ def train(demos: Demonstrations, objects: list[str], method: str, cfg: BCConfig,
         if recurrent:
             order = rng.permutation(len(train_set))
             take = int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1
-            b = _batch(train_set, list(order[:take]))
+            b = episode_batch(train_set, list(order[:take]))
         else:
             b = _frames(whole, rng.choice(frames, min(cfg.batch_steps, len(frames)), replace=False))
         parts = losses(net, b)
@@ -264,6 +271,12 @@ class BCAgent:
         world = canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
         obs = torch.from_numpy(flat_observation(world)).float()[None, None]
         net = self.model.net
-        mean, _, grip_logit, self.state = net(obs, self.state)
-        step = (mean[0, 0] * net.act_std + net.act_mean).double().numpy()
-        return np.concatenate([apply_rotvec_delta(poses[0], step), [GRIP_CLOSED if grip_logit.item() > 0 else 0]])
+        mean, _, logits, self.state = net(obs, self.state)
+        return command(net, poses[0], mean[0, 0], logits[0, 0, 0])
+
+
+def command(net: GaussianPolicy, ee: np.ndarray, mean: torch.Tensor, grip_logit: torch.Tensor) -> np.ndarray:
+    """The environment's action ``(8,)``: e_t ``(7,)`` moved by a_t's mean (standardised
+    ``(6,)``), the gripper closed when its logit is positive."""
+    step = (mean * net.act_std + net.act_mean).double().numpy()
+    return np.concatenate([apply_rotvec_delta(ee, step), [GRIP_CLOSED if grip_logit.item() > 0 else 0]])

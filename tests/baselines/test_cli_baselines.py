@@ -22,14 +22,14 @@ def dataset(tmp_path_factory):
     return tmp / "ds"
 
 
-@pytest.mark.parametrize("method", ["bc", "bc-rnn"])
+@pytest.mark.parametrize("method", ["bc", "bc-rnn", "taco"])
 def test_train_then_eval_closed_loop(dataset, tmp_path, method):
     params = tmp_path / "params.yaml"
     params.write_text(f"baselines:\n  {method}:\n    iterations: 20\n    hidden: 16\n    checkpoint_every: 10\n"
                       "eval:\n  max_steps:\n    stacking-1: 12\n")
     model, reports = tmp_path / "m", tmp_path / "reports"
     result = runner.invoke(app, ["train", "stacking-1", "--method", method, "--dataset", str(dataset), "--out", str(model),
-                                 "--reports", str(reports), "--params", str(params)])
+                                 "--recordings", str(dataset.parent / "rec"), "--reports", str(reports), "--params", str(params)])
     assert result.exit_code == 0, result.output
     report = json.loads((reports / "stacking-1" / method / "train.json").read_text())
     assert report["method"] == method and report["iterations"] == 20 and report["episodes"] == 2
@@ -50,7 +50,10 @@ def test_bad_input_is_one_line(dataset, tmp_path):
                                "--reports", str(tmp_path / "reports"), "--params", str(params)]).exit_code == 0
     (tmp_path / "bad.yaml").write_text("baselines:\n  bc:\n    iteratoins: 5\n")
     cases = [
-        (["train", "stacking-1", "--method", "taco", "--dataset", str(dataset)], "baseline 'taco' is not built yet"),
+        (["train", "stacking-1", "--method", "gail", "--dataset", str(dataset)], "baseline 'gail' is not built yet"),
+        (["train", "stacking-1", "--method", "taco", "--dataset", str(dataset), "--recordings", str(tmp_path)],
+         "no .mcap recordings or rosbag2 directories"),
+        (["eval", "stacking-1", "--method", "taco", "--model", str(model)], "not a trained taco model"),
         (["train", "stacking-1", "--method", "dagger", "--dataset", str(dataset)], "unknown baseline 'dagger'"),
         (["train", "stacking-1", "--method", "bc", "--dataset", str(tmp_path)], "not a LeRobot dataset"),
         (["train", "stacking-1", "--method", "bc", "--dataset", str(dataset), "--params", str(tmp_path / "bad.yaml")],
