@@ -217,7 +217,7 @@ def train(
     or a baseline on the pose dataset."""
     import dataclasses
 
-    from hsp.baselines import config_class, train_baseline
+    from hsp.baselines import check_method, config_class, train_baseline
     from hsp.policy.stage import train_task
     from hsp.policy.train import TrainConfig
     from hsp.tasks.registry import load_task
@@ -225,6 +225,8 @@ def train(
     try:
         params = load_params(params_file)
         hierarchy = method in ("proposed", "supervised")
+        if not hierarchy:
+            check_method(method, ("proposed", "supervised"))
         cfg = section(params, "train", TrainConfig) if hierarchy else section(params, f"baselines.{method}",
                                                                                config_class(method))
         if iterations is not None:

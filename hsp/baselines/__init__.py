@@ -19,11 +19,13 @@ PLANNED = ("gail", "act", "diffusion")
 """Baselines of issue 20 not built yet: asking for one is a clear error."""
 
 
-def check_method(method: str) -> None:
+def check_method(method: str, others: tuple[str, ...] = ()) -> None:
+    """A one-line error for a baseline not built yet or a name that is none (``others``:
+    the caller's own methods, listed in the message)."""
     if method in PLANNED:
         raise HspError(f"baseline {method!r} is not built yet (issue 20); built: {', '.join(METHODS)}")
     if method not in METHODS:
-        raise HspError(f"unknown baseline {method!r}; built: {', '.join(METHODS)}")
+        raise HspError(f"unknown method {method!r}; valid methods: {', '.join((*others, *METHODS))}")
 
 
 def _module(method: str):
@@ -35,36 +37,26 @@ def _module(method: str):
 
 def config_class(method: str) -> type:
     """The configuration dataclass of ``method`` (its section ``baselines.METHOD`` of params.yaml)."""
-    module = _module(method)
-    return module.TacoConfig if method == "taco" else module.BCConfig
+    from hsp.baselines.common import BaselineConfig
 
-
-def annotated_sketches(task: Task, dataset_dir: Path, recordings_dir: Path | None) -> list[list[str]]:
-    """Per dataset episode, the sketch of the demonstrator's annotation (TACO's weak
-    supervision), its objects matched to the tracker's as the supervised labels are."""
-    from hsp.baselines.taco import sketch_of
-    from hsp.dataset.reader import load_episodes
-    from hsp.policy.stage import annotation_labels
-
-    if recordings_dir is None:
-        raise HspError("taco needs the recordings with the demonstrator's annotation for its sketches (--recordings)")
-    poses, _, _ = load_episodes(dataset_dir, task.name, task.names)
-    return [sketch_of(lab.tool, lab.target, task.names) for lab in annotation_labels(task, recordings_dir, poses)]
+    check_method(method)
+    return BaselineConfig
 
 
 def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cfg, seed: int,
                    recordings_dir: Path | None = None) -> dict:
-    """Train ``method`` on the pose dataset (taco: and the sketches of the annotation in
+    """Train ``method`` on the pose dataset (taco: with the sketches of the annotation in
     ``recordings_dir``) and save it to ``out_dir``; the stage's report."""
     from hsp.baselines.observations import load_demonstrations
+    from hsp.baselines.taco import annotated_sketches
 
     module = _module(method)
     start = time.perf_counter()
-    demos = load_demonstrations(task, dataset_dir, cfg.moving_m)
+    demos, poses = load_demonstrations(task, dataset_dir, cfg.moving_m)
     log.info("train %s %s: read %d episodes (%d frames) from %s", task.name, method, len(demos),
              sum(len(o) for o in demos.obs), dataset_dir)
     if method == "taco":
-        sketches = annotated_sketches(task, dataset_dir, recordings_dir)
+        sketches = annotated_sketches(task, poses, recordings_dir)
         model, report = module.train(demos, sketches, task.names, cfg, seed, str(recordings_dir))
     else:
         model, report = module.train(demos, task.names, method, cfg, seed)
@@ -72,14 +64,12 @@ def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cf
     return {"method": method, "iterations": cfg.iterations, **report, "seconds": time.perf_counter() - start}
 
 
-def load_agent(task: Task, method: str, model_dir: Path, fps: int):
+def load_agent(task: Task, method: str, model_dir: Path | None, fps: int):
     """The closed-loop agent of a trained baseline: ``reset(poses, seed)``, ``act(poses)``."""
     module = _module(method)
-    if not Path(model_dir).exists():
+    if model_dir is None or not Path(model_dir).exists():
         raise HspError(f"{model_dir}: model directory not found (run `hsp train {task.name} --method {method}`)")
-    model = module.load(model_dir)
-    if method != "taco" and model.method != method:
-        raise HspError(f"{model_dir}: a {model.method} model, not {method}")
+    model = module.load(model_dir, method)
     if model.fps != fps:
         raise HspError(f"{model_dir}: trained on {model.fps} fps demonstrations, the environment runs at {fps}")
     return module.TacoAgent(model, task, str(model_dir)) if method == "taco" else module.BCAgent(model, task, str(model_dir))

@@ -7,9 +7,8 @@
   them (:func:`~hsp.labeling.label.canonical_poses`); ``(9n,)``.
 * a_t, the dataset's ``action``: e_t's change to the next frame (world translation and
   rotation vector, :func:`~hsp.dataset.writer.actions`); ``(6,)``.
-* g_t, the gripper: closed while an object moves with the end-effector, by the same motion
-  evidence the labeller reads (:func:`~hsp.labeling.priors.tool_evidence`). A hand
-  demonstration has no gripper signal; this is the one a robot would have needed.
+* g_t, the gripper (:func:`gripper_closed`): a hand demonstration has no gripper signal;
+  this is the one a robot would have needed, read from the poses alone.
 """
 
 from __future__ import annotations
@@ -25,7 +24,6 @@ from hsp.dataset.reader import load_episodes
 from hsp.dataset.writer import actions
 from hsp.errors import HspError
 from hsp.labeling.label import canonical_poses
-from hsp.labeling.priors import tool_evidence
 from hsp.tasks.registry import Task
 
 POSE_FEATURES = 9
@@ -37,6 +35,29 @@ def flat_observation(world: np.ndarray) -> np.ndarray:
     R = Rotation.from_quat(world[..., 3:].reshape(-1, 4)).as_matrix()[:, :, :2]
     per_object = np.concatenate([world[..., :3], R.reshape(world.shape[:-1] + (6,))], axis=-1)
     return per_object.reshape(world.shape[:-2] + (-1,))
+
+
+def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float) -> np.ndarray:
+    """g_t ``(H,)`` from world poses ``(H, n, 7)`` and tracked flags ``(H, n)``. The step
+    t → t+1 closes the gripper when an object moves more than ``moving_m`` while its offset
+    from the end-effector changes by less (it is carried), and opens it when the
+    end-effector moves that much with no object moving (it left what it held); between such
+    steps g_t keeps its last value (a pause while holding keeps holding). Steps touching a
+    lost pose say nothing."""
+    H = len(world)
+    if H < 2:
+        return np.zeros(H, bool)
+    x = world[:, :, :3]
+    move = np.linalg.norm(np.diff(x, axis=0), axis=-1)  # (H-1, n)
+    offset = np.linalg.norm(np.diff(x[:, 1:] - x[:, :1], axis=0), axis=-1)  # (H-1, n-1)
+    tracked = ok[1:] & ok[:-1]
+    moving = (move[:, 1:] > moving_m) & tracked[:, 1:]
+    carried = (moving & (offset < moving_m) & tracked[:, :1]).any(axis=1)
+    alone = (move[:, 0] > moving_m) & tracked[:, 0] & ~moving.any(axis=1) & tracked[:, 1:].all(axis=1)
+    event = np.where(carried, 1, np.where(alone, -1, 0))
+    last = np.maximum.accumulate(np.where(event != 0, np.arange(H - 1), -1))
+    closed = np.where(last >= 0, event[np.maximum(last, 0)] == 1, False)
+    return np.append(closed, closed[-1])
 
 
 @dataclass
@@ -65,15 +86,16 @@ def episode_arrays(world: np.ndarray, status: np.ndarray, symmetries: list[str],
     ok = status != TrackStatus.LOST
     observed = np.zeros(len(world), bool)
     observed[:-1] = ok[:-1, 0] & ok[1:, 0]
-    grip = tool_evidence(world, ok, moving_m) > 0
+    grip = gripper_closed(world, ok, moving_m)
     return (flat_observation(canonical_poses(world, symmetries)), actions(world[:, 0], status[:, 0]), grip, observed)
 
 
-def load_demonstrations(task: Task, dataset_dir: Path, moving_m: float) -> Demonstrations:
-    """Every episode of a pose dataset of ``task`` as :class:`Demonstrations`."""
+def load_demonstrations(task: Task, dataset_dir: Path, moving_m: float) -> tuple[Demonstrations, list[np.ndarray]]:
+    """Every episode of a pose dataset of ``task`` as :class:`Demonstrations`, and the
+    episodes' world poses ``(H, n, 7)``."""
     poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
     if not poses:
         raise HspError(f"{dataset_dir}: the dataset holds no episodes")
     symmetries = [o.symmetry for o in task.objects]
     parts = [episode_arrays(w, s, symmetries, moving_m) for w, s in zip(poses, status)]
-    return Demonstrations(*(list(x) for x in zip(*parts)), fps=int(meta["fps"]))
+    return Demonstrations(*(list(x) for x in zip(*parts)), fps=int(meta["fps"])), poses

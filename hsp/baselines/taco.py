@@ -24,8 +24,9 @@ summed by the forward recursion over α_t(j) = P(a_{1:t}, ζ_t = j):
 in log space (:func:`log_likelihood`). Training maximises Σ log P(ρ | τ) over whole
 episodes; the checkpoint kept is the one with the highest held-out likelihood per frame.
 At test time the sketch is the demonstrations' most common one; its sub-policies run in
-order, each until its stop head fires, the last one until the episode ends (success or the
-step limit: the environment, not the policy, ends an episode here). The stop is drawn from
+order, each until its stop head fires (at most one stop per step, none at the first, as the
+alignment model has it), the last one until the episode ends (success or the step limit:
+the environment, not the policy, ends an episode here). The stop is drawn from
 s_{b_j}(o_t) (seeded by the episode), not thresholded: where a demonstrator waits at a
 way-point, the frames before the switch look alike and s is spread over them (a few per
 cent each), so a threshold of ½ might never be crossed. Actions are the means.
@@ -33,8 +34,6 @@ cent each), so a threshold of ½ might never be crossed. Actions are the means.
 
 from __future__ import annotations
 
-import copy
-import json
 import logging
 from collections import Counter
 from dataclasses import asdict, dataclass
@@ -43,45 +42,31 @@ from pathlib import Path
 import numpy as np
 import torch
 from rich.progress import track
-from safetensors import SafetensorError
-from safetensors.torch import load_file, save_file
 from torch import nn
 
-from hsp.baselines.bc import GaussianPolicy, command, episode_batch, frame_nll, standardise
-from hsp.baselines.observations import POSE_FEATURES, Demonstrations, flat_observation
+from hsp.baselines.common import (BaselineConfig, BestCheckpoint, GaussianPolicy, PoseAgent, command, episode_batch,
+                                  frame_nll, load_model, save_model, whole_episodes)
+from hsp.baselines.observations import Demonstrations
 from hsp.errors import HspError
-from hsp.fileio import atomic_path
-from hsp.labeling.label import canonical_poses
 from hsp.policy.train import split
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
 
-FORMAT = 1
 IMPOSSIBLE = -1e30
 """log α of a sketch position not reachable yet: finite, since the gradient of
 logaddexp(−inf, −inf) is NaN and would poison every weight."""
 
 
-@dataclass(frozen=True)
-class TacoConfig:
-    iterations: int = 1500
-    """Gradient steps."""
-    batch_steps: int = 2048
-    """Whole episodes per batch until they hold this many frames."""
-    hidden: int = 128
-    layers: int = 2
-    """Hidden layers (and their units) of each sub-policy's MLP."""
-    learning_rate: float = 1e-3
-    moving_m: float = 0.002
-    """m per frame above which an object counts as moving, for the gripper labels g_t."""
-    validation_every: int = 5
-    checkpoint_every: int = 250
+def annotated_sketches(task: Task, poses: list[np.ndarray], recordings_dir: Path | None) -> list[list[str]]:
+    """Per dataset episode of world poses ``(H, n, 7)``, the sketch of the demonstrator's
+    annotation in ``recordings_dir`` (TACO's weak supervision), its objects matched to the
+    tracker's as the supervised labels are."""
+    from hsp.policy.stage import annotation_labels
 
-    def __post_init__(self) -> None:
-        if min(self.iterations, self.batch_steps, self.hidden, self.layers, self.checkpoint_every) < 1:
-            raise HspError(f"baselines.taco: iterations, batch_steps, hidden, layers and checkpoint_every must be ≥ 1, "
-                           f"got {self}")
+    if recordings_dir is None:
+        raise HspError("taco needs the recordings with the demonstrator's annotation for its sketches (--recordings)")
+    return [sketch_of(lab.tool, lab.target, task.names) for lab in annotation_labels(task, recordings_dir, poses)]
 
 
 def sketch_of(tool: np.ndarray, target: np.ndarray, names: list[str]) -> list[str]:
@@ -166,7 +151,7 @@ class TacoModel:
     fps: int
 
 
-def train(demos: Demonstrations, sketches: list[list[str]], objects: list[str], cfg: TacoConfig, seed: int,
+def train(demos: Demonstrations, sketches: list[list[str]], objects: list[str], cfg: BaselineConfig, seed: int,
           source: str = "demonstrations") -> tuple[TacoModel, dict]:
     """Sub-policies fitted to ``demos`` and their ``sketches`` by maximising log P(ρ | τ)."""
     check_sketches(demos, sketches, source)
@@ -177,17 +162,16 @@ def train(demos: Demonstrations, sketches: list[list[str]], objects: list[str], 
     train_set, held_out = demos.subset(fit_on), demos.subset(held)
     model = SubPolicies(symbols, demos.obs[0].shape[1], cfg.hidden, cfg.layers)
     for net in model.policies:
-        standardise(net, train_set)
+        net.standardise(train_set)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.learning_rate)
     lengths = np.array([len(o) for o in train_set.obs])
     held_batch = episode_batch(held_out, list(range(len(held_out)))) if held else None
-    best: tuple[float, int, dict] | None = None
+    best = BestCheckpoint()
     report: dict[str, float | int] = {}
     log.info("train taco: %d episodes (%d frames), %d held out, %d symbols, %d distinct sketches", len(train_set),
              lengths.sum(), len(held_out), len(symbols), len({tuple(s) for s in sketches}))
     for it in track(range(1, cfg.iterations + 1), description="train taco"):
-        order = rng.permutation(len(train_set))
-        take = list(order[:int(np.searchsorted(np.cumsum(lengths[order]), cfg.batch_steps)) + 1])
+        take = whole_episodes(rng, lengths, cfg.batch_steps)
         b = episode_batch(train_set, take)
         loss = -episode_log_likelihood(model, b, [sketches[fit_on[i]] for i in take]).sum() / b["present"].sum()
         opt.zero_grad()
@@ -198,12 +182,11 @@ def train(demos: Demonstrations, sketches: list[list[str]], objects: list[str], 
             with torch.no_grad():
                 score = (-episode_log_likelihood(model, held_batch, [sketches[i] for i in held]).sum()
                          / held_batch["present"].sum()).item()
-            log.info("iteration %d: held out, −log P(ρ | τ) %.3f per frame", it, score)
-            if best is None or score < best[0]:
-                best = (score, it, copy.deepcopy(model.state_dict()))
-    if best is not None:
-        model.load_state_dict(best[2])
-        report |= {"checkpoint_iteration": best[1], "validation_nll_per_frame": best[0]}
+            best.offer(score, it, model)
+            if it % (10 * cfg.checkpoint_every) == 0:
+                log.info("iteration %d: held out, −log P(ρ | τ) %.3f per frame", it, score)
+    if best.restore(model):
+        report |= {"checkpoint_iteration": best.iteration, "validation_nll_per_frame": best.score}
     counts = Counter(tuple(s) for s in sketches)
     sketch, n = counts.most_common(1)[0]
     report |= {"episodes": len(train_set), "frames": int(lengths.sum()), "validation_episodes": len(held_out),
@@ -212,62 +195,45 @@ def train(demos: Demonstrations, sketches: list[list[str]], objects: list[str], 
     return TacoModel(model.eval(), list(sketch), objects, demos.fps), report
 
 
-def save(model: TacoModel, cfg: TacoConfig, out_dir: Path) -> None:
-    """Weights (safetensors) and ``config.json``, the directory swapped in whole."""
-    with atomic_path(Path(out_dir)) as tmp:
-        tmp.mkdir()
-        save_file({k: v.contiguous() for k, v in model.net.state_dict().items()}, tmp / "model.safetensors")
-        config = {"format": FORMAT, "method": "taco", "symbols": model.net.symbols, "sketch": model.sketch,
-                  "objects": model.objects, "fps": model.fps, "d_obs": int(model.net.policies[0].obs_mean.shape[0]),
-                  "train": asdict(cfg)}
-        (tmp / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+def save(model: TacoModel, cfg: BaselineConfig, out_dir: Path) -> None:
+    save_model(model.net, {"method": "taco", "symbols": model.net.symbols, "sketch": model.sketch,
+                           "objects": model.objects, "fps": model.fps,
+                           "d_obs": int(model.net.policies[0].obs_mean.shape[0]), "train": asdict(cfg)}, out_dir)
 
 
-def load(model_dir: Path) -> TacoModel:
-    """A model written by :func:`save`; a one-line error naming the directory otherwise."""
-    model_dir = Path(model_dir)
-    if not (model_dir / "config.json").is_file() or not (model_dir / "model.safetensors").is_file():
-        raise HspError(f"{model_dir}: not a trained taco model (needs config.json and model.safetensors; run `hsp train`)")
-    try:
-        config = json.loads((model_dir / "config.json").read_text())
-        if config.get("format") != FORMAT or config.get("method") != "taco":
-            raise ValueError(f"model format {config.get('format')} of method {config.get('method')!r}, this hsp reads "
-                             f"taco format {FORMAT}")
-        cfg = TacoConfig(**config["train"])
-        net = SubPolicies(config["symbols"], config["d_obs"], cfg.hidden, cfg.layers)
-        net.load_state_dict(load_file(model_dir / "model.safetensors"))
-        return TacoModel(net.eval(), config["sketch"], config["objects"], int(config["fps"]))
-    except (SafetensorError, ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
-        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise HspError(f"{model_dir}: not a trained taco model of this hsp version (retrain with `hsp train`): {first}") from None
+def load(model_dir: Path, method: str = "taco") -> TacoModel:
+    """A model written by :func:`save`."""
+    def build(config: dict) -> SubPolicies:
+        cfg = BaselineConfig(**config["train"])
+        return SubPolicies(config["symbols"], config["d_obs"], cfg.hidden, cfg.layers)
+
+    net, config = load_model(model_dir, method, build)
+    return TacoModel(net, config["sketch"], config["objects"], int(config["fps"]))
 
 
-class TacoAgent:
-    """Closed loop: the test sketch's sub-policies in order, each until its stop head fires
-    (drawn from s_{b_j}(o_t)), the last until the episode ends."""
+class TacoAgent(PoseAgent):
+    """Closed loop: the test sketch's sub-policies in order. From the second step on, the
+    running sub-policy b_j reads o_t and stops with probability s_{b_j}(o_t) (one stop per
+    step; b_{j+1} then acts at o_t, as in training); the last runs until the episode ends."""
 
     def __init__(self, model: TacoModel, task: Task, source: str = "model") -> None:
-        if model.objects != task.names:
-            raise HspError(f"{source}: a model for objects {model.objects}, not those of task {task.name!r} {task.names}")
-        if model.net.policies[0].obs_mean.shape[0] != POSE_FEATURES * len(task.names):
-            raise HspError(f"{source}: observations of {model.net.policies[0].obs_mean.shape[0]} numbers, task "
-                           f"{task.name!r} has {POSE_FEATURES * len(task.names)}")
-        self.model, self.symmetries = model, [o.symmetry for o in task.objects]
+        super().__init__(model.objects, int(model.net.policies[0].obs_mean.shape[0]), task, source)
+        self.model = model
         self.order = [model.net.symbols.index(x) for x in model.sketch]
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
-        self.first = np.asarray(poses, np.float64).copy()
-        self.j = 0
+        super().reset(poses, seed)
+        self.j, self.started = 0, False
         self.rng = np.random.default_rng([seed, 2])  # the stop draws, apart from the layout's stream
 
     @torch.no_grad()
     def act(self, poses: np.ndarray) -> np.ndarray:
-        world = canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
-        obs = torch.from_numpy(flat_observation(world)).float()[None, None]
-        while True:
+        obs = self.observe(poses)
+        net = self.model.net.policies[self.order[self.j]]
+        mean, _, logits, _ = net(obs)
+        if self.started and self.j < len(self.order) - 1 and self.rng.random() < torch.sigmoid(logits[0, 0, 1]).item():
+            self.j += 1
             net = self.model.net.policies[self.order[self.j]]
             mean, _, logits, _ = net(obs)
-            last = self.j == len(self.order) - 1
-            if last or self.rng.random() >= torch.sigmoid(logits[0, 0, 1]).item():  # b_j goes on
-                return command(net, poses[0], mean[0, 0], logits[0, 0, 0])
-            self.j += 1
+        self.started = True
+        return command(net, poses[0], mean[0, 0], logits[0, 0, 0])

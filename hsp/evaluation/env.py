@@ -74,7 +74,9 @@ class HspEnv(gym.Env):
     ``[x, y, z, qx, qy, qz, qw]`` at the end of the step, then the object to hold (0: none;
     ``i``: close on object ``i`` once it is within grasp reach; :data:`GRIP_CLOSED`: close
     on the nearest object within grasp reach, as a plain gripper does; it is let go when the
-    command returns to 0). The arm moves there along a straight line and a slerp over the step."""
+    command returns to 0). Either closes as soon as its object comes within reach while the
+    command stays closed (one closed on air does not have to open first), the same for
+    every method. The arm moves there along a straight line and a slerp over the step."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
@@ -91,7 +93,8 @@ class HspEnv(gym.Env):
         low = np.array([-2, -2, -1, -1, -1, -1, -1, GRIP_CLOSED], np.float32)
         high = np.array([2, 2, 2, 1, 1, 1, 1, n - 1], np.float32)
         self.action_space = gym.spaces.Box(low, high, dtype=np.float32)
-        self._boxes = [(v.min(0), v.max(0)) for v in (obj_vertices(task.mesh(i)) for i in range(n))]
+        verts = [obj_vertices(task.mesh(i)) for i in range(n)]
+        self._box_lo, self._box_hi = np.array([v.min(0) for v in verts]), np.array([v.max(0) for v in verts])
         self.scene: Scene | None = None
         self.poses: list[np.ndarray] = []
 
@@ -157,11 +160,9 @@ class HspEnv(gym.Env):
     def box_distances(self) -> np.ndarray:
         """Distance (m) from the tool-centre point to each object's box ``(n,)`` (object 0: inf)."""
         poses = self.poses[-1]
-        out = np.full(len(poses), np.inf)
-        for i in range(1, len(poses)):
-            local = transform_points(inverse(poses[i]), poses[0, :3])
-            lo, hi = self._boxes[i]
-            out[i] = np.linalg.norm(np.maximum(lo - local, 0) + np.maximum(local - hi, 0))
+        local = transform_points(inverse(poses), poses[0, :3])  # (n, 3): the point in each object's frame
+        out = np.linalg.norm(np.maximum(self._box_lo - local, 0) + np.maximum(local - self._box_hi, 0), axis=1)
+        out[0] = np.inf
         return out
 
     def within_reach(self, i: int) -> bool:

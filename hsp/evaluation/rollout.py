@@ -18,7 +18,7 @@ import numpy as np
 from rich.progress import Progress
 
 from hsp.baselines import METHODS as BASELINES
-from hsp.baselines import PLANNED, check_method, load_agent
+from hsp.baselines import check_method, load_agent
 from hsp.errors import HspError
 from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
 from hsp.evaluation.observers import CameraObserver, Observer, SimObserver
@@ -154,10 +154,8 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
              out_dir: Path) -> dict[str, float | int | str]:
     """Run ``cfg.runs × cfg.episodes`` episodes; write ``eval.json``, ``episodes.jsonl`` and
     ``videos/`` into ``out_dir`` (suffixed ``_camera`` for that observer), all or nothing."""
-    if method in PLANNED:
-        check_method(method)
     if method not in METHODS:
-        raise HspError(f"unknown method {method!r}; valid methods: {', '.join(METHODS)}")
+        check_method(method, ("oracle", *HIERARCHY))
     make_observer(task, observer, cfg)  # bad input fails here, before any episode
     if method in HIERARCHY:
         load_runner(task, method, model_dir)

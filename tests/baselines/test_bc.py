@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from hsp.baselines import bc
+from hsp.baselines.common import BaselineConfig
 from hsp.baselines.observations import Demonstrations, flat_observation
 from hsp.evaluation.env import GRIP_CLOSED
 from hsp.geometry import apply_rotvec_delta
@@ -66,8 +67,8 @@ def toy_success_rate(agent: bc.BCAgent, task, layouts: int = 10, seed: int = 1) 
 def test_learns_a_toy_reach_that_an_untrained_policy_fails(tasks, method, tmp_path):
     task = tasks["stacking-1"]
     demos = toy_demonstrations(task, 200, seed=0)
-    cfg = bc.BCConfig(iterations=1000, batch_steps=512, hidden=64, layers=2, learning_rate=3e-3, checkpoint_every=500)
-    untrained, _ = bc.train(demos, task.names, method, bc.BCConfig(iterations=1, hidden=64, checkpoint_every=1), seed=0)
+    cfg = BaselineConfig(iterations=1000, batch_steps=512, hidden=64, layers=2, learning_rate=3e-3, checkpoint_every=500)
+    untrained, _ = bc.train(demos, task.names, method, BaselineConfig(iterations=1, hidden=64, checkpoint_every=1), seed=0)
     model, report = bc.train(demos, task.names, method, cfg, seed=0)
     held = demos.subset(list(range(4, 200, 5)))
     assert bc.validate(model.net, held)["nll_action"] < bc.validate(untrained.net, held)["nll_action"] - 5
@@ -76,7 +77,7 @@ def test_learns_a_toy_reach_that_an_untrained_policy_fails(tasks, method, tmp_pa
     assert toy_success_rate(bc.BCAgent(model, task), task) >= 0.8
 
     bc.save(model, cfg, tmp_path / "m")
-    loaded = bc.load(tmp_path / "m")
+    loaded = bc.load(tmp_path / "m", method)
     world = toy_layout(task, np.random.default_rng(5))
     a, b = bc.BCAgent(model, task), bc.BCAgent(loaded, task)
     a.reset(world, 0), b.reset(world, 0)
@@ -87,6 +88,6 @@ def test_learns_a_toy_reach_that_an_untrained_policy_fails(tasks, method, tmp_pa
 def test_the_same_seed_gives_the_same_weights(tasks):
     task = tasks["stacking-1"]
     demos = toy_demonstrations(task, 10, seed=0)
-    cfg = bc.BCConfig(iterations=20, batch_steps=64, hidden=16, checkpoint_every=10)
+    cfg = BaselineConfig(iterations=20, batch_steps=64, hidden=16, checkpoint_every=10)
     first, second = (bc.train(demos, task.names, "bc-rnn", cfg, seed=3)[0].net.state_dict() for _ in range(2))
     assert all(torch.equal(first[k], second[k]) for k in first)

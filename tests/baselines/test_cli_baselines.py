@@ -53,8 +53,8 @@ def test_bad_input_is_one_line(dataset, tmp_path):
         (["train", "stacking-1", "--method", "gail", "--dataset", str(dataset)], "baseline 'gail' is not built yet"),
         (["train", "stacking-1", "--method", "taco", "--dataset", str(dataset), "--recordings", str(tmp_path)],
          "no .mcap recordings or rosbag2 directories"),
-        (["eval", "stacking-1", "--method", "taco", "--model", str(model)], "not a trained taco model"),
-        (["train", "stacking-1", "--method", "dagger", "--dataset", str(dataset)], "unknown baseline 'dagger'"),
+        (["eval", "stacking-1", "--method", "taco", "--model", str(model)], "a bc model, not taco"),
+        (["train", "stacking-1", "--method", "dagger", "--dataset", str(dataset)], "unknown method 'dagger'; valid methods: proposed, supervised, bc"),
         (["train", "stacking-1", "--method", "bc", "--dataset", str(tmp_path)], "not a LeRobot dataset"),
         (["train", "stacking-1", "--method", "bc", "--dataset", str(dataset), "--params", str(tmp_path / "bad.yaml")],
          "baselines.bc: unknown keys ['iteratoins']"),
@@ -63,6 +63,8 @@ def test_bad_input_is_one_line(dataset, tmp_path):
         (["eval", "stacking-2", "--method", "bc", "--model", str(model)], "not those of task 'stacking-2'"),
         (["eval", "stacking-1", "--method", "bc", "--model", str(tmp_path / "none")], "model directory not found"),
         (["eval", "stacking-1", "--method", "bc", "--model", str(dataset)], "not a trained bc model"),
+        (["eval", "stacking-1", "--method", "act", "--model", str(model)], "baseline 'act' is not built yet"),
+        (["train", "stacking-1", "--method", "diffusion", "--dataset", str(dataset)], "baseline 'diffusion' is not built yet"),
     ]
     for args, message in cases:
         result = runner.invoke(app, [*args, "--out", str(tmp_path / "out")], terminal_width=300)

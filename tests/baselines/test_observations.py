@@ -7,12 +7,13 @@ from hsp.dataset.features import TrackStatus
 
 
 def carry_episode() -> np.ndarray:
-    """World poses ``(30, 3, 7)``: the hand moves 1 cm a frame along x, alone for 10 frames,
-    carrying block 1 for the next 10 (from frame 10), alone again for the last 10."""
+    """World poses ``(30, 3, 7)``: the hand moves 1 cm a frame along x, pausing from frame 14
+    to 16; from x = 10 cm (frame 10) to 20 cm (frame 22) it carries block 1."""
     H = 30
     world = np.zeros((H, 3, 7))
     world[..., 6] = 1.0
-    world[:, 0, 0] = 0.01 * np.arange(H)
+    steps = np.where((np.arange(H - 1) >= 14) & (np.arange(H - 1) < 16), 0.0, 0.01)
+    world[:, 0, 0] = np.r_[0.0, np.cumsum(steps)]
     world[:, 0, 2] = 0.1
     world[:, 1, 0] = np.clip(world[:, 0, 0], 0.10, 0.20)
     world[:, 2, :2] = [0.5, 0.5]
@@ -30,10 +31,12 @@ def test_observation_is_positions_and_two_rotation_columns_whatever_the_quaterni
 
 
 def test_gripper_closes_while_an_object_moves_with_the_hand_and_lost_steps_are_not_observed():
+    """Closed from the first step that moves the block to its last (a pause while holding
+    keeps it closed), open from the first step the hand moves alone."""
     world = carry_episode()
     status = np.zeros((30, 3), np.int64)
     status[25, 0] = TrackStatus.LOST
     obs, action, grip, observed = episode_arrays(world, status, ["none", "none", "none"], moving_m=0.002)
-    assert not grip[:8].any() and grip[11:19].all() and not grip[23:].any()
+    assert list(np.flatnonzero(grip)) == list(range(10, 22))
     np.testing.assert_allclose(action[3], [0.01, 0, 0, 0, 0, 0], atol=1e-12)
     assert list(np.flatnonzero(~observed)) == [24, 25, 29]
