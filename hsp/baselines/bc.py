@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from rich.progress import track
 
-from hsp.baselines.common import (BaselineConfig, BestCheckpoint, GaussianPolicy, PoseAgent, command, episode_batch,
+from hsp.baselines.common import (BaselineConfig, BestCheckpoint, GaussianPolicy, PoseAgent, episode_batch,
                                   frame_nll, load_model, save_model, whole_episodes)
 from hsp.baselines.observations import Demonstrations
 from hsp.policy.train import split
@@ -149,4 +149,4 @@ class BCAgent(PoseAgent):
     @torch.no_grad()
     def act(self, poses: np.ndarray) -> np.ndarray:
         mean, _, logits, self.state = self.model.net(self.observe(poses), self.state)
-        return command(self.model.net, poses[0], mean[0, 0], logits[0, 0, 0])
+        return self.command(self.model.net, poses[0], mean[0, 0], logits[0, 0, 0])

@@ -19,6 +19,7 @@ from torch import nn
 from hsp.baselines.observations import POSE_FEATURES, Demonstrations, flat_observation
 from hsp.errors import HspError
 from hsp.evaluation.env import GRIP_CLOSED
+from hsp.evaluation.proposed import SHORTFALL_M, with_shortfall
 from hsp.fileio import atomic_path
 from hsp.geometry import apply_rotvec_delta
 from hsp.labeling.label import canonical_poses
@@ -160,13 +161,6 @@ def load_model(model_dir: Path, method: str, build: Callable[[dict], nn.Module])
                        f"{first}") from None
 
 
-def command(net: GaussianPolicy, ee: np.ndarray, mean: torch.Tensor, grip_logit: torch.Tensor) -> np.ndarray:
-    """The environment's action ``(8,)``: e_t ``(7,)`` moved by a_t's mean (standardised
-    ``(6,)``), the gripper closed when its logit is positive."""
-    step = (mean * net.act_std + net.act_mean).double().numpy()
-    return np.concatenate([apply_rotvec_delta(ee, step), [GRIP_CLOSED if grip_logit.item() > 0 else 0]])
-
-
 class PoseAgent:
     """A closed-loop agent reading world poses ``(n, 7)``: ``reset(poses, seed)``, then
     ``act(poses) -> (8,)`` per control step (subclasses)."""
@@ -181,11 +175,25 @@ class PoseAgent:
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
         self.first = np.asarray(poses, np.float64).copy()
+        self.last: np.ndarray | None = None
 
     def observe(self, poses: np.ndarray) -> torch.Tensor:
         """o_t ``(1, 1, 9n)``, symmetric objects made canonical by the episode's first frame."""
         world = canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
         return torch.from_numpy(flat_observation(world)).float()[None, None]
+
+    def command(self, net: GaussianPolicy, ee: np.ndarray, mean: torch.Tensor, grip_logit: torch.Tensor) -> np.ndarray:
+        """The environment's action ``(8,)``: e_t ``(7,)`` moved by a_t's mean (standardised
+        ``(6,)``) plus the arm's shortfall on the last command (as the hierarchy's runner does,
+        :func:`~hsp.evaluation.proposed.with_shortfall`: a hand's steps replayed from where a
+        lagging arm is seen end 2-5 cm from where the hand went), the gripper closed when its
+        logit is positive."""
+        step = (mean * net.act_std + net.act_mean).double().numpy()
+        target = apply_rotvec_delta(ee, step)
+        if self.last is not None:
+            target = with_shortfall(target, ee, self.last, SHORTFALL_M)
+        self.last = target
+        return np.concatenate([target, [GRIP_CLOSED if grip_logit.item() > 0 else 0]])
 
 
 class BestCheckpoint:

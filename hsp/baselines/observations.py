@@ -37,13 +37,22 @@ def flat_observation(world: np.ndarray) -> np.ndarray:
     return per_object.reshape(world.shape[:-2] + (-1,))
 
 
+LIFT_LAG = 3
+"""Steps after the hand leaves a rest within which the object must start moving with it
+for the rest to count as the grasp, and steps the hand must move away from every object
+to count as a release (a tracked object at rest lags its carrier by up to two frames)."""
+
+
 def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float) -> np.ndarray:
     """g_t ``(H,)`` from world poses ``(H, n, 7)`` and tracked flags ``(H, n)``. The step
     t → t+1 closes the gripper when an object moves more than ``moving_m`` while its offset
-    from the end-effector changes by less (it is carried), and opens it when the
-    end-effector moves that much with no object moving (it left what it held); between such
-    steps g_t keeps its last value (a pause while holding keeps holding). Steps touching a
-    lost pose say nothing."""
+    from the end-effector changes by less (it is carried), and so does every step of the
+    end-effector's rest just before it starts such a carry (a robot closes where the hand
+    arrived, not once the object is in the air); the gripper opens when the end-effector
+    moves that much away from every object while none moves, for ``LIFT_LAG`` steps in a row
+    (it left what it held; a tracked block held at rest lags the lift by two frames).
+    Between such steps g_t keeps its last value: a pause while holding keeps holding.
+    Steps touching a lost pose say nothing."""
     H = len(world)
     if H < 2:
         return np.zeros(H, bool)
@@ -51,11 +60,19 @@ def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float) -> np.nda
     move = np.linalg.norm(np.diff(x, axis=0), axis=-1)  # (H-1, n)
     offset = np.linalg.norm(np.diff(x[:, 1:] - x[:, :1], axis=0), axis=-1)  # (H-1, n-1)
     tracked = ok[1:] & ok[:-1]
-    moving = (move[:, 1:] > moving_m) & tracked[:, 1:]
-    carried = (moving & (offset < moving_m) & tracked[:, :1]).any(axis=1)
-    alone = (move[:, 0] > moving_m) & tracked[:, 0] & ~moving.any(axis=1) & tracked[:, 1:].all(axis=1)
-    event = np.where(carried, 1, np.where(alone, -1, 0))
-    last = np.maximum.accumulate(np.where(event != 0, np.arange(H - 1), -1))
+    carried = ((move[:, 1:] > moving_m) & (offset < moving_m) & tracked[:, 1:] & tracked[:, :1]).any(axis=1)
+    hand = (move[:, 0] > moving_m) & tracked[:, 0]
+    steps = np.arange(H - 1)
+    leaves = np.minimum.accumulate(np.where(hand, steps, H - 1)[::-1])[::-1]  # first step ≥ t the hand moves
+    soon = np.r_[np.cumsum(carried), np.full(LIFT_LAG + 1, carried.sum())]
+    carried_soon = soon[steps + LIFT_LAG] - np.r_[0, soon[:H - 2]] > 0  # a carry within [t, t + LIFT_LAG]
+    grasp = ~hand & carried_soon[np.minimum(leaves, H - 2)] & (leaves < H - 1)
+    still = ~((move[:, 1:] > moving_m) & tracked[:, 1:]).any(axis=1)
+    leaving = hand & still & (offset > moving_m).all(axis=1) & tracked.all(axis=1)  # from objects at rest
+    run = np.r_[np.cumsum(leaving), np.full(LIFT_LAG, leaving.sum())]
+    alone = run[steps + LIFT_LAG - 1] - np.r_[0, run[:H - 2]] == np.minimum(LIFT_LAG, H - 1 - steps)  # all leaving
+    event = np.where(carried | grasp, 1, np.where(alone, -1, 0))
+    last = np.maximum.accumulate(np.where(event != 0, steps, -1))
     closed = np.where(last >= 0, event[np.maximum(last, 0)] == 1, False)
     return np.append(closed, closed[-1])
 

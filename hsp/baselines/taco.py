@@ -1,7 +1,7 @@
 """``taco``: Task Decomposition via Temporal Alignment for Control (Shiarlis et al., 2018).
 
 One sub-policy per sketch symbol b, each with an action head π_b(a_t, g_t | o_t) (the
-Gaussian and gripper of :class:`~hsp.baselines.bc.GaussianPolicy` on the flat observation)
+Gaussian and gripper of :class:`~hsp.baselines.common.GaussianPolicy` on the flat observation)
 and a stop head π_b(STOP | o_t). A demonstration comes with its sketch τ = (b_1 … b_L),
 the sub-tasks in the order they were done, not where each starts or ends. The weak
 supervision here is the demonstrator's annotation: each sketch symbol is a (tool, target)
@@ -44,7 +44,7 @@ import torch
 from rich.progress import track
 from torch import nn
 
-from hsp.baselines.common import (BaselineConfig, BestCheckpoint, GaussianPolicy, PoseAgent, command, episode_batch,
+from hsp.baselines.common import (BaselineConfig, BestCheckpoint, GaussianPolicy, PoseAgent, episode_batch,
                                   frame_nll, load_model, save_model, whole_episodes)
 from hsp.baselines.observations import Demonstrations
 from hsp.errors import HspError
@@ -98,7 +98,7 @@ def log_likelihood(log_act: torch.Tensor, log_stop: torch.Tensor, log_go: torch.
 
 
 class SubPolicies(nn.Module):
-    """One :class:`~hsp.baselines.bc.GaussianPolicy` per symbol, with a stop logit."""
+    """One :class:`~hsp.baselines.common.GaussianPolicy` per symbol, with a stop logit."""
 
     def __init__(self, symbols: list[str], d_obs: int, hidden: int, layers: int) -> None:
         super().__init__()
@@ -236,4 +236,4 @@ class TacoAgent(PoseAgent):
             net = self.model.net.policies[self.order[self.j]]
             mean, _, logits, _ = net(obs)
         self.started = True
-        return command(net, poses[0], mean[0, 0], logits[0, 0, 0])
+        return self.command(net, poses[0], mean[0, 0], logits[0, 0, 0])
