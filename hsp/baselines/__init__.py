@@ -72,4 +72,5 @@ def load_agent(task: Task, method: str, model_dir: Path | None, fps: int):
     model = module.load(model_dir, method)
     if model.fps != fps:
         raise HspError(f"{model_dir}: trained on {model.fps} fps demonstrations, the environment runs at {fps}")
-    return module.TacoAgent(model, task, str(model_dir)) if method == "taco" else module.BCAgent(model, task, str(model_dir))
+    agent = module.TacoAgent if method == "taco" else module.BCAgent
+    return agent(model, task, str(model_dir))

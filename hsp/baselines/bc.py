@@ -54,7 +54,8 @@ def losses(net: GaussianPolicy, b: dict[str, torch.Tensor]) -> dict[str, torch.T
     mean, log_std, logits, _ = net(b["obs"])
     nll, bce = frame_nll(net, b, mean, log_std, logits)
     observed, present = b["observed"], b["present"]
-    return {"action": nll.sum() / observed.sum().clamp(min=1), "grip": (bce * present).sum() / present.sum().clamp(min=1)}
+    return {"action": nll.sum() / observed.sum().clamp(min=1),
+            "grip": (bce * present).sum() / present.sum().clamp(min=1)}
 
 
 @torch.no_grad()
@@ -64,15 +65,15 @@ def validate(net: GaussianPolicy, demos: Demonstrations) -> dict[str, float]:
     training = net.training
     net.eval()
     b = episode_batch(demos, list(range(len(demos))))
-    parts = losses(net, b)
-    mean, _, logits, _ = net(b["obs"])
+    mean, log_std, logits, _ = net(b["obs"])
+    nll, bce = frame_nll(net, b, mean, log_std, logits)
     pred = mean * net.act_std + net.act_mean
     observed, present = b["observed"], b["present"]
     err_mm = 1000 * (pred[..., :3] - b["action"][..., :3]).norm(dim=-1)
     err_deg = torch.rad2deg((pred[..., 3:] - b["action"][..., 3:]).norm(dim=-1))
     grip_right = ((logits[..., 0] > 0) == b["grip"]).float()
     net.train(training)
-    return {"nll_action": parts["action"].item(), "nll_grip": parts["grip"].item(),
+    return {"nll_action": (nll.sum() / observed.sum().clamp(min=1)).item(), "nll_grip": bce[present].mean().item(),
             "action_error_mm": (err_mm[observed].mean()).item(), "action_error_deg": (err_deg[observed].mean()).item(),
             "grip_accuracy": (grip_right[present].mean()).item()}
 
@@ -115,7 +116,8 @@ def train(demos: Demonstrations, objects: list[str], method: str, cfg: BaselineC
                          figures["nll_action"] + figures["nll_grip"], figures["action_error_mm"],
                          figures["action_error_deg"], figures["grip_accuracy"])
     if best.restore(net):
-        report |= {"checkpoint_iteration": best.iteration} | {f"validation_{k}": v for k, v in validate(net, held_out).items()}
+        report |= {"checkpoint_iteration": best.iteration}
+        report |= {f"validation_{k}": v for k, v in validate(net, held_out).items()}
     report |= {"episodes": len(train_set), "frames": int(lengths.sum()), "validation_episodes": len(held_out)}
     return BCModel(net.eval(), method, objects, demos.fps), report
 

@@ -186,7 +186,7 @@ class PoseAgent:
         """The environment's action ``(8,)``: e_t ``(7,)`` moved by a_t's mean (standardised
         ``(6,)``) plus the arm's shortfall on the last command (as the hierarchy's runner does,
         :func:`~hsp.evaluation.proposed.with_shortfall`: a hand's steps replayed from where a
-        lagging arm is seen end 2-5 cm from where the hand went), the gripper closed when its
+        lagging arm is seen ended 4-6 cm from where the hand went, stacking-1), the gripper closed when its
         logit is positive."""
         step = (mean * net.act_std + net.act_mean).double().numpy()
         target = apply_rotvec_delta(ee, step)
