@@ -52,7 +52,7 @@ def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cf
 
     module = _module(method)
     start = time.perf_counter()
-    demos, poses = load_demonstrations(task, dataset_dir, cfg.moving_m)
+    demos, poses = load_demonstrations(task, dataset_dir, cfg.moving_m, cfg.grasp_m)
     log.info("train %s %s: read %d episodes (%d frames) from %s", task.name, method, len(demos),
              sum(len(o) for o in demos.obs), dataset_dir)
     if method == "taco":

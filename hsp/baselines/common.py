@@ -52,6 +52,8 @@ class BaselineConfig:
     """Adam's step size."""
     moving_m: float = 0.002
     """m per frame above which an object counts as moving, for the gripper labels g_t."""
+    grasp_m: float = 0.01
+    """m within which the hand's offset from an object counts as the grasp it carries it by (g_t)."""
     validation_every: int = 5
     """Every this-many-th episode validates; 0: none (the last iterate is kept)."""
     checkpoint_every: int = 50

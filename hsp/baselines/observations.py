@@ -37,44 +37,41 @@ def flat_observation(world: np.ndarray) -> np.ndarray:
     return per_object.reshape(world.shape[:-2] + (-1,))
 
 
-LIFT_LAG = 3
-"""Steps after the hand leaves a rest within which the object must start moving with it
-for the rest to count as the grasp, and steps the hand must move away from every object
-to count as a release (a tracked object at rest lags its carrier by up to two frames)."""
+def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float, grasp_m: float) -> np.ndarray:
+    """g_t ``(H,)`` from world poses ``(H, n, 7)`` and tracked flags ``(H, n)``.
 
-
-def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float) -> np.ndarray:
-    """g_t ``(H,)`` from world poses ``(H, n, 7)`` and tracked flags ``(H, n)``. The step
-    t → t+1 closes the gripper when an object moves more than ``moving_m`` while its offset
-    from the end-effector changes by less (it is carried), and so does every step of the
-    end-effector's rest just before it starts such a carry (a robot closes where the hand
-    arrived, not once the object is in the air); the gripper opens when the end-effector
-    moves that much away from every object while none moves, for ``LIFT_LAG`` steps in a row
-    (it left what it held; a tracked block held at rest lags the lift by two frames).
-    Between such steps g_t keeps its last value: a pause while holding keeps holding.
-    Steps touching a lost pose say nothing."""
-    H = len(world)
+    A step t → t+1 *carries* object j when j moves more than ``moving_m`` while its offset
+    from the end-effector, r_t = x_j − x_0, changes by less. The gripper is closed over
+    every run of steps in which a carried object keeps moving (a fast hand's tracked block
+    lags it by centimetres, so r_t wanders; a block does not move by itself) and opens where
+    the object comes to rest; it is closed too back from the first step s of such a run over
+    the steps where r_t is still within ``grasp_m`` of r_s (the hand was already where it
+    lifts from: a robot closes where the hand arrived, whatever the tracked hand's jitter at
+    rest), and between two such runs of the same object when r_t stays within ``grasp_m``
+    all along (a pause while holding). Steps touching a lost pose continue a run."""
+    H, n = world.shape[:2]
+    closed = np.zeros(H, bool)
     if H < 2:
-        return np.zeros(H, bool)
+        return closed
     x = world[:, :, :3]
-    move = np.linalg.norm(np.diff(x, axis=0), axis=-1)  # (H-1, n)
-    offset = np.linalg.norm(np.diff(x[:, 1:] - x[:, :1], axis=0), axis=-1)  # (H-1, n-1)
-    tracked = ok[1:] & ok[:-1]
-    carried = ((move[:, 1:] > moving_m) & (offset < moving_m) & tracked[:, 1:] & tracked[:, :1]).any(axis=1)
-    hand = (move[:, 0] > moving_m) & tracked[:, 0]
-    steps = np.arange(H - 1)
-    leaves = np.minimum.accumulate(np.where(hand, steps, H - 1)[::-1])[::-1]  # first step ≥ t the hand moves
-    soon = np.r_[np.cumsum(carried), np.full(LIFT_LAG + 1, carried.sum())]
-    carried_soon = soon[steps + LIFT_LAG] - np.r_[0, soon[:H - 2]] > 0  # a carry within [t, t + LIFT_LAG]
-    grasp = ~hand & carried_soon[np.minimum(leaves, H - 2)] & (leaves < H - 1)
-    still = ~((move[:, 1:] > moving_m) & tracked[:, 1:]).any(axis=1)
-    leaving = hand & still & (offset > moving_m).all(axis=1) & tracked.all(axis=1)  # from objects at rest
-    run = np.r_[np.cumsum(leaving), np.full(LIFT_LAG, leaving.sum())]
-    alone = run[steps + LIFT_LAG - 1] - np.r_[0, run[:H - 2]] == np.minimum(LIFT_LAG, H - 1 - steps)  # all leaving
-    event = np.where(carried | grasp, 1, np.where(alone, -1, 0))
-    last = np.maximum.accumulate(np.where(event != 0, steps, -1))
-    closed = np.where(last >= 0, event[np.maximum(last, 0)] == 1, False)
-    return np.append(closed, closed[-1])
+    r = x[:, 1:] - x[:, :1]  # (H, n-1, 3)
+    tracked = ok[:, 1:] & ok[:, :1]  # (H, n-1)
+    observed = tracked[1:] & tracked[:-1]
+    move = np.linalg.norm(np.diff(x[:, 1:], axis=0), axis=-1) > moving_m  # (H-1, n-1)
+    carried = move & (np.linalg.norm(np.diff(r, axis=0), axis=-1) < moving_m) & observed
+    moving = move | ~observed
+    for j in range(n - 1):
+        edges = np.diff(np.r_[0, moving[:, j].astype(np.int8), 0])
+        runs = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if carried[s:e, j].any()]
+        for k, (s, e) in enumerate(runs):
+            closed[s:e] = True
+            away = tracked[:, j] & (np.linalg.norm(r[:, j] - r[s, j], axis=-1) >= grasp_m)
+            closed[np.r_[-1, np.flatnonzero(away[:s])].max() + 1:s] = True
+            if k + 1 < len(runs):
+                gap = slice(e, runs[k + 1][0])
+                closed[gap] |= not (tracked[gap, j] & (np.linalg.norm(r[gap, j] - r[e, j], axis=-1) >= grasp_m)).any()
+    closed[-1] = closed[-2]
+    return closed
 
 
 @dataclass
@@ -96,23 +93,24 @@ class Demonstrations:
                               fps=self.fps)
 
 
-def episode_arrays(world: np.ndarray, status: np.ndarray, symmetries: list[str], moving_m: float
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def episode_arrays(world: np.ndarray, status: np.ndarray, symmetries: list[str], moving_m: float,
+                   grasp_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """o_t, a_t, g_t and a_t observed of one episode of world poses ``(H, n, 7)`` and tracking
     status ``(H, n)``."""
     ok = status != TrackStatus.LOST
     observed = np.zeros(len(world), bool)
     observed[:-1] = ok[:-1, 0] & ok[1:, 0]
-    grip = gripper_closed(world, ok, moving_m)
+    grip = gripper_closed(world, ok, moving_m, grasp_m)
     return (flat_observation(canonical_poses(world, symmetries)), actions(world[:, 0], status[:, 0]), grip, observed)
 
 
-def load_demonstrations(task: Task, dataset_dir: Path, moving_m: float) -> tuple[Demonstrations, list[np.ndarray]]:
+def load_demonstrations(task: Task, dataset_dir: Path, moving_m: float, grasp_m: float
+                        ) -> tuple[Demonstrations, list[np.ndarray]]:
     """Every episode of a pose dataset of ``task`` as :class:`Demonstrations`, and the
     episodes' world poses ``(H, n, 7)``."""
     poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
     if not poses:
         raise HspError(f"{dataset_dir}: the dataset holds no episodes")
     symmetries = [o.symmetry for o in task.objects]
-    parts = [episode_arrays(w, s, symmetries, moving_m) for w, s in zip(poses, status)]
+    parts = [episode_arrays(w, s, symmetries, moving_m, grasp_m) for w, s in zip(poses, status)]
     return Demonstrations(*(list(x) for x in zip(*parts)), fps=int(meta["fps"])), poses

@@ -30,28 +30,32 @@ def test_observation_is_positions_and_two_rotation_columns_whatever_the_quaterni
     np.testing.assert_allclose(obs[5, :9], [0.05, 0, 0.1, 1, 0, 0, 1, 0, 0])
 
 
-def test_gripper_closes_while_an_object_moves_with_the_hand_and_lost_steps_are_not_observed():
-    """Closed from the first step that moves the block to its last (a pause while holding
-    keeps it closed), open from the first step the hand moves alone."""
+def test_gripper_closes_while_a_carried_object_moves_and_lost_steps_are_not_observed():
+    """Closed from the first step that moves the block to its last: through a pause while
+    holding and through a frame where the tracked block lags the hand by 3 cm (it still
+    moves); open from the first step the hand moves alone."""
     world = carry_episode()
+    world[13, 1, 0] -= 0.03
     status = np.zeros((30, 3), np.int64)
     status[3, 0] = TrackStatus.LOST
-    obs, action, grip, observed = episode_arrays(world, status, ["none", "none", "none"], moving_m=0.002)
+    obs, action, grip, observed = episode_arrays(world, status, ["none", "none", "none"], moving_m=0.002,
+                                                 grasp_m=0.005)
     assert list(np.flatnonzero(grip)) == list(range(10, 22))
     np.testing.assert_allclose(action[5], [0.01, 0, 0, 0, 0, 0], atol=1e-12)
     assert list(np.flatnonzero(~observed)) == [2, 3, 29]
 
 
-def test_gripper_closes_where_the_hand_came_to_rest_before_the_lift():
-    """The hand rests on block 1 from frame 6 to 10, then lifts it; the block's tracked pose
-    lags the hand by one frame."""
+def test_gripper_closes_where_the_hand_came_to_rest_before_the_lift_whatever_its_jitter():
+    """The hand rests on block 1 from frame 5 to 10, its tracked height jittering by 4 mm,
+    then lifts it; the block's tracked pose lags the hand by one frame."""
     H = 20
     world = np.zeros((H, 3, 7))
     world[..., 6] = 1.0
     world[:, 2, :2] = [0.5, 0.5]
     world[:, 1, :3] = [0.1, 0.0, 0.02]
     world[:, 0, 0] = np.minimum(0.02 * np.arange(H), 0.1)  # arrives at frame 5
-    world[:, 0, 2] = 0.02 + np.maximum(0, np.arange(H) - 10) * 0.01  # lifts from frame 10
-    world[:, 1, 2] = 0.02 + np.maximum(0, np.arange(H) - 11) * 0.01
-    grip = episode_arrays(world, np.zeros((H, 3), np.int64), ["none"] * 3, moving_m=0.002)[2]
+    world[:, 0, 2] = 0.02 + np.maximum(0, np.arange(H) - 10) * 0.005  # lifts from frame 10
+    world[6:10:2, 0, 2] += 0.004
+    world[:, 1, 2] = 0.02 + np.maximum(0, np.arange(H) - 11) * 0.005
+    grip = episode_arrays(world, np.zeros((H, 3), np.int64), ["none"] * 3, moving_m=0.002, grasp_m=0.01)[2]
     assert list(np.flatnonzero(grip)) == list(range(5, H))
