@@ -199,17 +199,28 @@ def label(
         _fail(e)
 
 
+def env_config(params: dict, task: str):
+    """The task's environment as ``params.yaml`` sets it (``record.fps``, ``eval.*``): the
+    one every method is scored in and GAIL trains in."""
+    from hsp.evaluation.env import EnvConfig
+
+    return EnvConfig(fps=int(param(params, "record.fps", 15)), max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
+                     **{k: float(v) for k in ("grasp_reach_m", "max_speed_m_s", "max_turn_deg_s")
+                        if (v := param(params, f"eval.{k}", None)) is not None})
+
+
 @app.command()
 def train(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
     method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels) | supervised (on the "
-                               "demonstrator's annotation: the upper bound) | a baseline: bc | bc-rnn | taco"),
+                               "demonstrator's annotation: the upper bound) | a baseline: bc | bc-rnn | taco | gail"),
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     labels: Optional[Path] = typer.Option(None, help="pseudo-labels, for proposed [data/labels/TASK.parquet]"),
     recordings: Optional[Path] = typer.Option(None, help="recordings with the annotation, for supervised and taco's sketches "
                                               "[data/recordings/TASK]"),
     out: Optional[Path] = typer.Option(None, help="model directory [data/models/TASK/METHOD]"),
-    iterations: Optional[int] = typer.Option(None, help="gradient steps [params: train.iterations]"),
+    iterations: Optional[int] = typer.Option(None, help="gradient steps, gail: environment steps [params: "
+                                            "train.iterations, baselines.METHOD.iterations|timesteps]"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
@@ -230,7 +241,7 @@ def train(
         cfg = section(params, "train", TrainConfig) if hierarchy else section(params, f"baselines.{method}",
                                                                                config_class(method))
         if iterations is not None:
-            cfg = dataclasses.replace(cfg, iterations=iterations)
+            cfg = dataclasses.replace(cfg, **{"timesteps" if method == "gail" else "iterations": iterations})
         t = load_task(task)
         ds = dataset or Path("data/datasets") / task
         out_dir = out or Path("data/models") / task / method
@@ -240,7 +251,8 @@ def train(
                       else {"recordings_dir": recordings or Path("data/recordings") / task})
             report = train_task(t, ds, out_dir, cfg, seed, **source)
         else:
-            report = train_baseline(t, method, ds, out_dir, cfg, seed, recordings or Path("data/recordings") / task)
+            report = train_baseline(t, method, ds, out_dir, cfg, seed, recordings or Path("data/recordings") / task,
+                                    env_config(params, task))
         _write_report(reports / task / method / "train.json", report, out_dir)
     except HspError as e:
         _fail(e)
@@ -249,7 +261,8 @@ def train(
 @app.command(name="eval")
 def evaluate(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
-    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised | bc | bc-rnn | taco"),
+    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised | "
+                               "bc | bc-rnn | taco | gail"),
     observer: str = typer.Option("sim", help="sim (the simulator's poses) | camera (rendered RGB-D, tracked online)"),
     episodes: Optional[int] = typer.Option(None, help="episodes per run [params: eval.episodes]"),
     runs: Optional[int] = typer.Option(None, help="runs, each on its own held-out layouts [params: eval.runs]"),
@@ -261,7 +274,6 @@ def evaluate(
 ) -> None:
     """Run a method closed loop on the simulated Kuka over held-out layouts and score it
     with the paper's success criteria (eval.json, episodes.jsonl, videos/)."""
-    from hsp.evaluation.env import EnvConfig
     from hsp.evaluation.rollout import EvalConfig
     from hsp.perception.tracker import TrackerConfig
     from hsp.recording.record import camera_rig
@@ -277,9 +289,7 @@ def evaluate(
             seed=int(param(params, "seed", 0)), workers=int(pick(workers, "eval.workers", 2)),
             videos=int(pick(videos, "eval.videos", 1)),
             recorded_episodes=int(param(params, f"record.episodes.{task}", 0)),
-            env=EnvConfig(fps=int(param(params, "record.fps", 15)), max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
-                          **{k: float(v) for k in ("grasp_reach_m", "max_speed_m_s", "max_turn_deg_s")
-                             if (v := param(params, f"eval.{k}", None)) is not None}),
+            env=env_config(params, task),
             rig=camera_rig(params), tracker=section(params, "tracker", TrackerConfig),
         )
         model_dir = None if method == "oracle" else (model or Path("data/models") / task / method)

@@ -6,16 +6,21 @@ from __future__ import annotations
 
 import logging
 import time
+from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hsp.errors import HspError
 from hsp.tasks.registry import Task
 
+if TYPE_CHECKING:
+    from hsp.evaluation.env import EnvConfig
+
 log = logging.getLogger(__name__)
 
-METHODS = ("bc", "bc-rnn", "taco")
+METHODS = ("bc", "bc-rnn", "taco", "gail")
 """Baselines built so far."""
-PLANNED = ("gail", "act", "diffusion")
+PLANNED = ("act", "diffusion")
 """Baselines of issue 20 not built yet: asking for one is a clear error."""
 
 
@@ -29,24 +34,26 @@ def check_method(method: str, others: tuple[str, ...] = ()) -> None:
 
 
 def _module(method: str):
-    from hsp.baselines import bc, taco
+    from hsp.baselines import bc, gail, taco
 
     check_method(method)
-    return taco if method == "taco" else bc
+    return {"taco": taco, "gail": gail}.get(method, bc)
 
 
 def config_class(method: str) -> type:
     """The configuration dataclass of ``method`` (its section ``baselines.METHOD`` of params.yaml)."""
     from hsp.baselines.common import BaselineConfig
+    from hsp.baselines.gail import GailConfig
 
     check_method(method)
-    return BaselineConfig
+    return GailConfig if method == "gail" else BaselineConfig
 
 
 def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cfg, seed: int,
-                   recordings_dir: Path | None = None) -> dict:
+                   recordings_dir: Path | None = None, env: EnvConfig | None = None) -> dict:
     """Train ``method`` on the pose dataset (taco: with the sketches of the annotation in
-    ``recordings_dir``) and save it to ``out_dir``; the stage's report."""
+    ``recordings_dir``; gail: interacting with the task's environment configured by ``env``)
+    and save it to ``out_dir``; the stage's report."""
     from hsp.baselines.observations import load_demonstrations
     from hsp.baselines.taco import annotated_sketches
 
@@ -58,6 +65,10 @@ def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cf
     if method == "taco":
         sketches = annotated_sketches(task, poses, recordings_dir)
         model, report = module.train(demos, sketches, task.names, cfg, seed, str(recordings_dir))
+    elif method == "gail":
+        from hsp.evaluation.env import EnvConfig, HspEnv
+
+        model, report = module.train(demos, task, partial(HspEnv, task, env or EnvConfig(fps=demos.fps)), cfg, seed)
     else:
         model, report = module.train(demos, task.names, method, cfg, seed)
     module.save(model, cfg, out_dir)
@@ -72,5 +83,5 @@ def load_agent(task: Task, method: str, model_dir: Path | None, fps: int):
     model = module.load(model_dir, method)
     if model.fps != fps:
         raise HspError(f"{model_dir}: trained on {model.fps} fps demonstrations, the environment runs at {fps}")
-    agent = module.TacoAgent if method == "taco" else module.BCAgent
-    return agent(model, task, str(model_dir))
+    agent = {"taco": "TacoAgent", "gail": "GailAgent"}.get(method, "BCAgent")
+    return getattr(module, agent)(model, task, str(model_dir))

@@ -95,11 +95,17 @@ class GaussianPolicy(nn.Module):
 
     def standardise(self, demos: Demonstrations) -> None:
         """Set the input and action scales from the training demonstrations."""
-        obs = np.concatenate(demos.obs)
-        act = np.concatenate([a[o] for a, o in zip(demos.action, demos.observed)])
-        for name, x, floor in (("obs", obs, OBS_MIN_STD), ("act", act, ACT_MIN_STD)):
-            getattr(self, f"{name}_mean").copy_(torch.from_numpy(x.mean(0)))
-            getattr(self, f"{name}_std").copy_(torch.from_numpy(np.maximum(x.std(0), floor)))
+        for name, x in scales(demos).items():
+            getattr(self, name).copy_(torch.from_numpy(x))
+
+
+def scales(demos: Demonstrations) -> dict[str, np.ndarray]:
+    """Mean and spread of o_t and of a_t over the demonstrations' (observed) steps:
+    ``obs_mean``, ``obs_std``, ``act_mean``, ``act_std`` (spreads floored)."""
+    obs = np.concatenate(demos.obs)
+    act = np.concatenate([a[o] for a, o in zip(demos.action, demos.observed)])
+    return {"obs_mean": obs.mean(0), "obs_std": np.maximum(obs.std(0), OBS_MIN_STD),
+            "act_mean": act.mean(0), "act_std": np.maximum(act.std(0), ACT_MIN_STD)}
 
 
 def frame_nll(net: GaussianPolicy, b: dict[str, torch.Tensor], mean: torch.Tensor, log_std: torch.Tensor,
@@ -179,23 +185,29 @@ class PoseAgent:
         self.first = np.asarray(poses, np.float64).copy()
         self.last: np.ndarray | None = None
 
+    def observation(self, poses: np.ndarray) -> np.ndarray:
+        """o_t ``(9n,)``, symmetric objects made canonical by the episode's first frame."""
+        return flat_observation(canonical_poses(np.stack([self.first, poses]), self.symmetries)[1])
+
     def observe(self, poses: np.ndarray) -> torch.Tensor:
-        """o_t ``(1, 1, 9n)``, symmetric objects made canonical by the episode's first frame."""
-        world = canonical_poses(np.stack([self.first, poses]), self.symmetries)[1]
-        return torch.from_numpy(flat_observation(world)).float()[None, None]
+        """o_t as a network's input ``(1, 1, 9n)``."""
+        return torch.from_numpy(self.observation(poses)).float()[None, None]
 
     def command(self, net: GaussianPolicy, ee: np.ndarray, mean: torch.Tensor, grip_logit: torch.Tensor) -> np.ndarray:
-        """The environment's action ``(8,)``: e_t ``(7,)`` moved by a_t's mean (standardised
-        ``(6,)``) plus the arm's shortfall on the last command (as the hierarchy's runner does,
-        :func:`~hsp.evaluation.proposed.with_shortfall`: a hand's steps replayed from where a
-        lagging arm is seen ended 4-6 cm from where the hand went, stacking-1), the gripper closed when its
+        """:meth:`move` by the mean of a_t (standardised ``(6,)``), the gripper closed when its
         logit is positive."""
-        step = (mean * net.act_std + net.act_mean).double().numpy()
+        return self.move(ee, (mean * net.act_std + net.act_mean).double().numpy(), grip_logit.item() > 0)
+
+    def move(self, ee: np.ndarray, step: np.ndarray, closed: bool) -> np.ndarray:
+        """The environment's action ``(8,)``: e_t ``(7,)`` moved by a_t ``(6,)`` plus the arm's
+        shortfall on the last command (as the hierarchy's runner does,
+        :func:`~hsp.evaluation.proposed.with_shortfall`: a hand's steps replayed from where a
+        lagging arm is seen ended 4-6 cm from where the hand went, stacking-1), and the gripper."""
         target = apply_rotvec_delta(ee, step)
         if self.last is not None:
             target = with_shortfall(target, ee, self.last, SHORTFALL_M)
         self.last = target
-        return np.concatenate([target, [GRIP_CLOSED if grip_logit.item() > 0 else 0]])
+        return np.concatenate([target, [GRIP_CLOSED if closed else 0]])
 
 
 class BestCheckpoint:

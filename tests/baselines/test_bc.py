@@ -27,13 +27,13 @@ def toy_layout(task, rng: np.random.Generator) -> np.ndarray:
     return poses
 
 
-def toy_demonstrations(task, episodes: int, seed: int) -> Demonstrations:
+def toy_demonstrations(task, episodes: int, seed: int, layout=toy_layout) -> Demonstrations:
     """The hand moves a third of the way to the goal each frame (with a little noise) and
     closes the gripper within 1 cm of it; the blocks stay still."""
     rng = np.random.default_rng(seed)
     obs, action, grip = [], [], []
     for _ in range(episodes):
-        world = toy_layout(task, rng)
+        world = layout(task, rng)
         o, a, g = [], [], []
         for _ in range(STEPS):
             o.append(flat_observation(world))
@@ -48,12 +48,12 @@ def toy_demonstrations(task, episodes: int, seed: int) -> Demonstrations:
     return Demonstrations(obs, action, grip, [np.ones(STEPS, bool) for _ in range(episodes)], fps=15)
 
 
-def toy_success_rate(agent: bc.BCAgent, task, layouts: int = 10, seed: int = 1) -> float:
+def toy_success_rate(agent, task, layouts: int = 10, seed: int = 1, layout=toy_layout) -> float:
     """Closed loop without physics: the hand goes where the agent commands."""
     rng = np.random.default_rng(seed)
     wins = 0
     for _ in range(layouts):
-        world = toy_layout(task, rng)
+        world = layout(task, rng)
         agent.reset(world, 0)
         for _ in range(STEPS):
             command = agent.act(world)

@@ -50,7 +50,7 @@ def test_bad_input_is_one_line(dataset, tmp_path):
                                "--reports", str(tmp_path / "reports"), "--params", str(params)]).exit_code == 0
     (tmp_path / "bad.yaml").write_text("baselines:\n  bc:\n    iteratoins: 5\n")
     cases = [
-        (["train", "stacking-1", "--method", "gail", "--dataset", str(dataset)], "baseline 'gail' is not built yet"),
+        (["eval", "stacking-1", "--method", "gail", "--model", str(model)], "not a trained gail model"),
         (["train", "stacking-1", "--method", "taco", "--dataset", str(dataset), "--recordings", str(tmp_path)],
          "no .mcap recordings or rosbag2 directories"),
         (["eval", "stacking-1", "--method", "taco", "--model", str(model)], "a bc model, not taco"),
