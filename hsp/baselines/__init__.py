@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import asdict
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -72,7 +73,7 @@ def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cf
     else:
         model, report = module.train(demos, task.names, method, cfg, seed)
     module.save(model, cfg, out_dir)
-    return {"method": method, "iterations": cfg.iterations, **report, "seconds": time.perf_counter() - start}
+    return {"method": method, "config": asdict(cfg), **report, "seconds": time.perf_counter() - start}
 
 
 def load_agent(task: Task, method: str, model_dir: Path | None, fps: int):

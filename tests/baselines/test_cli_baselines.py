@@ -32,7 +32,7 @@ def test_train_then_eval_closed_loop(dataset, tmp_path, method):
                                  "--recordings", str(dataset.parent / "rec"), "--reports", str(reports), "--params", str(params)])
     assert result.exit_code == 0, result.output
     report = json.loads((reports / "stacking-1" / method / "train.json").read_text())
-    assert report["method"] == method and report["iterations"] == 20 and report["episodes"] == 2
+    assert report["method"] == method and report["config"]["iterations"] == 20 and report["episodes"] == 2
     assert json.loads((model / "config.json").read_text())["train"]["hidden"] == 16
     out = tmp_path / "r"
     result = runner.invoke(app, ["eval", "stacking-1", "--method", method, "--model", str(model), "--episodes", "2",
