@@ -2,8 +2,8 @@
 fails, and a saved model acts exactly as the one trained.
 
 The toy is bc's reach straight down onto the block (the hand starts above it at a random
-height): PPO needs some 10^5 steps or more for bc's reach to anywhere on the table, even on
-a dense reward, too many for a test."""
+height): on bc's reach to anywhere on the table GAIL succeeded in 0.05 of 20 layouts after
+10^5 steps, too many for a test."""
 
 from dataclasses import replace
 

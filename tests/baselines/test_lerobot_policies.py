@@ -1,0 +1,59 @@
+"""act and diffusion (LeRobot's policies, state only; not yet offered by `hsp train`, no
+toy test of their learning yet): batches laid out as LeRobot's dataset would, save -> load
+acts identically, LeRobot's own configuration errors one line."""
+
+import numpy as np
+import pytest
+
+from hsp.baselines import lerobot_policies as lp
+from hsp.errors import HspError
+from tests.baselines.test_bc import toy_demonstrations, toy_layout
+
+SMALL = {
+    "act": {"dim_model": 64, "dim_feedforward": 128, "n_heads": 4, "n_encoder_layers": 1, "n_decoder_layers": 1,
+            "n_vae_encoder_layers": 1, "latent_dim": 8, "chunk_size": 5, "n_action_steps": 5, "optimizer_lr": 1e-3},
+    "diffusion": {"down_dims": [16, 32, 64], "n_obs_steps": 2, "horizon": 8, "n_action_steps": 4,
+                  "noise_scheduler_type": "DDIM", "num_train_timesteps": 50, "num_inference_steps": 10,
+                  "scheduler_warmup_steps": 10, "optimizer_lr": 1e-3, "diffusion_step_embed_dim": 32},
+}
+
+
+def test_batch_clamps_to_the_episode_and_pads_what_lies_beyond_or_was_not_observed(tasks):
+    demos = toy_demonstrations(tasks["stacking-1"], 2, seed=0)
+    demos.observed[1][3] = False
+    cfg = lp.policy_config("diffusion", demos.obs[0].shape[1], SMALL["diffusion"])  # obs t-1, t; actions t-1 … t+6
+    b = lp.batch(demos, np.array([[1, 0], [1, 28]]), cfg)
+    assert b[lp.ENV].shape == (2, 2, 27) and b[lp.ACTION].shape == (2, 8, 7)  # 4 objects: 9 + 27
+    np.testing.assert_array_equal(b[lp.STATE][0, 0], b[lp.STATE][0, 1])  # t-1 clamped to t = 0
+    np.testing.assert_allclose(b[lp.STATE][1, 1].numpy(), demos.obs[1][28, :9].astype(np.float32))
+    assert b["action_is_pad"][0].tolist() == [True, False, False, False, True, False, False, False]
+    assert b["action_is_pad"][1].tolist() == [False, False, False, True, True, True, True, True]  # 30 frames
+    act = lp.batch(demos, np.array([[0, 4]]), lp.policy_config("act", 36, SMALL["act"]))
+    assert act[lp.ENV].shape == (1, 27) and act[lp.ACTION].shape == (1, 5, 7)
+
+
+@pytest.mark.parametrize("method", ["act", "diffusion"])
+def test_saved_model_acts_identically(tasks, method, tmp_path):
+    """Across a chunk: the action queue, and Diffusion's history and sampling noise, carry
+    over identically after save -> load."""
+    task = tasks["stacking-1"]
+    demos = toy_demonstrations(task, 10, seed=0)
+    cfg = lp.LeRobotPolicyConfig(iterations=3, batch_size=8, policy=SMALL[method], checkpoint_every=2)
+    model, report = lp.train(demos, task.names, method, cfg, seed=0)
+    assert report["validation_episodes"] == 2 and report["checkpoint_iteration"] in (2, 3)
+    lp.save(model, cfg, tmp_path / "m")
+    loaded = lp.load(tmp_path / "m", method)
+    world = toy_layout(task, np.random.default_rng(5))
+    a, b = lp.LeRobotAgent(model, task), lp.LeRobotAgent(loaded, task)
+    a.reset(world, 3), b.reset(world, 3)
+    for _ in range(6):
+        np.testing.assert_array_equal(a.act(world), b.act(world))
+    with pytest.raises(HspError, match="a act model, not diffusion|a diffusion model, not act"):
+        lp.load(tmp_path / "m", "diffusion" if method == "act" else "act")
+
+
+def test_lerobot_configuration_errors_are_one_line():
+    with pytest.raises(HspError, match=r"baselines.diffusion.policy: .*"):
+        lp.policy_config("diffusion", 36, {"horizon": 12})  # not a multiple of 2^len(down_dims)
+    with pytest.raises(HspError, match=r"baselines.act.policy: .*unexpected keyword"):
+        lp.policy_config("act", 36, {"chunk": 5})
