@@ -204,7 +204,8 @@ def env_config(params: dict, task: str):
     one every method is scored in and GAIL trains in."""
     from hsp.evaluation.env import EnvConfig
 
-    return EnvConfig(fps=int(param(params, "record.fps", 15)), max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
+    return EnvConfig(fps=int(param(params, "record.fps", 15)),
+                     max_steps=int(param(params, f"eval.max_steps.{task}", 600)),
                      **{k: float(v) for k in ("grasp_reach_m", "max_speed_m_s", "max_turn_deg_s")
                         if (v := param(params, f"eval.{k}", None)) is not None})
 

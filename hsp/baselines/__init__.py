@@ -49,7 +49,8 @@ def config_class(method: str) -> type:
     from hsp.baselines.lerobot_policies import LeRobotPolicyConfig
 
     check_method(method)
-    return {"gail": GailConfig, "act": LeRobotPolicyConfig, "diffusion": LeRobotPolicyConfig}.get(method, BaselineConfig)
+    return {"gail": GailConfig, "act": LeRobotPolicyConfig, "diffusion": LeRobotPolicyConfig}.get(method,
+                                                                                                  BaselineConfig)
 
 
 def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cfg, seed: int,

@@ -115,7 +115,8 @@ class ImitationEnv(gym.Wrapper):
 
     def _observe(self, obs: dict) -> np.ndarray:
         self.poses = world_poses(obs)
-        return ((self.agent.observation(self.poses) - self.scale["obs_mean"]) / self.scale["obs_std"]).astype(np.float32)
+        o = (self.agent.observation(self.poses) - self.scale["obs_mean"]) / self.scale["obs_std"]
+        return o.astype(np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         obs, info = self.env.reset(seed=seed, options=options)
@@ -199,8 +200,8 @@ def train(demos: Demonstrations, task: Task, make_env: Callable[[], gym.Env], cf
     obs = np.concatenate([o[m] for o, m in zip(demos.obs, demos.observed)])
     act = np.concatenate([a[m] for a, m in zip(demos.action, demos.observed)])
     grip = np.concatenate([g[m] for g, m in zip(demos.grip, demos.observed)])
-    expert = pairs((obs - scale["obs_mean"]) / scale["obs_std"],
-                   np.concatenate([(act - scale["act_mean"]) / scale["act_std"], np.where(grip, 1.0, -1.0)[:, None]], 1))
+    u = np.c_[(act - scale["act_mean"]) / scale["act_std"], np.where(grip, 1.0, -1.0)]
+    expert = pairs((obs - scale["obs_mean"]) / scale["obs_std"], u)
     disc = mlp(expert.shape[1], cfg.hidden, cfg.layers, 1)
     factories = [partial(_imitation_env, make_env, task, scale)] * cfg.envs
     venv = SubprocVecEnv(factories) if cfg.processes and cfg.envs > 1 else DummyVecEnv(factories)

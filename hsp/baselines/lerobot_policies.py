@@ -163,7 +163,8 @@ def held_out_loss(model: LeRobotModel, demos: Demonstrations, seed: int, batch_s
         torch.manual_seed(seed)
         for i in range(0, len(frames), batch_size):
             part = frames[i:i + batch_size]
-            loss, _ = model.policy.forward(model.pre(batch(demos, part, model.policy.config)))  # type: ignore[attr-defined]
+            b = model.pre(batch(demos, part, model.policy.config))  # type: ignore[attr-defined]
+            loss, _ = model.policy.forward(b)  # type: ignore[attr-defined]
             total += loss.item() * len(part)
     return total / len(frames)
 
@@ -261,7 +262,8 @@ class LeRobotAgent(PoseAgent):
         o = torch.from_numpy(self.observation(poses)).float()
         with torch.random.fork_rng():  # Diffusion's sampling noise: the episode's own stream
             torch.manual_seed(self.generator_seed)
-            a = self.model.post(self.model.policy.select_action(  # type: ignore[attr-defined]
-                self.model.pre({STATE: o[:POSE_FEATURES], ENV: o[POSE_FEATURES:]})))[0].double().numpy()  # type: ignore[attr-defined]
+            chosen = self.model.policy.select_action(  # type: ignore[attr-defined]
+                self.model.pre({STATE: o[:POSE_FEATURES], ENV: o[POSE_FEATURES:]}))  # type: ignore[operator]
+            a = self.model.post(chosen)[0].double().numpy()  # type: ignore[operator]
             self.generator_seed = int(torch.randint(2**31, ()).item())
         return self.move(poses[0], a[:6], bool(a[6] > 0.5))

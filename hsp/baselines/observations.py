@@ -62,7 +62,8 @@ def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float, grasp_m: 
     moving = move | ~observed
     for j in range(n - 1):
         edges = np.diff(np.r_[0, moving[:, j].astype(np.int8), 0])
-        runs = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if carried[s:e, j].any()]
+        runs = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
+                if carried[s:e, j].any()]
         for k, (s, e) in enumerate(runs):
             closed[s:e] = True
             away = tracked[:, j] & (np.linalg.norm(r[:, j] - r[s, j], axis=-1) >= grasp_m)
