@@ -4,6 +4,7 @@ as the hierarchy (issue 20). One module per method; this is their common face:
 
 from __future__ import annotations
 
+import importlib
 import logging
 import time
 from dataclasses import asdict
@@ -19,11 +20,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-METHODS = ("bc", "bc-rnn", "taco", "gail")
+METHODS = ("bc", "bc-rnn", "taco", "gail", "act")
 """Baselines built so far."""
-PLANNED = ("act", "diffusion")
-"""Baselines of issue 20 not offered yet (``lerobot_policies`` trains and runs them, but no
-toy test shows them learning yet): asking for one is a clear error."""
+PLANNED = ("diffusion",)
+"""Baselines of issue 20 not offered yet (``lerobot_policies`` trains and runs it, but no
+toy test shows it learning yet): asking for one is a clear error."""
 
 
 def check_method(method: str, others: tuple[str, ...] = ()) -> None:
@@ -35,22 +36,24 @@ def check_method(method: str, others: tuple[str, ...] = ()) -> None:
         raise HspError(f"unknown method {method!r}; valid methods: {', '.join((*others, *METHODS))}")
 
 
-def _module(method: str):
-    from hsp.baselines import bc, gail, lerobot_policies, taco
+_PARTS = {  # method: its module, configuration (params.yaml: baselines.METHOD) and closed-loop agent
+    "bc": ("bc", "BaselineConfig", "BCAgent"),
+    "bc-rnn": ("bc", "BaselineConfig", "BCAgent"),
+    "taco": ("taco", "BaselineConfig", "TacoAgent"),
+    "gail": ("gail", "GailConfig", "GailAgent"),
+    "act": ("lerobot_policies", "LeRobotPolicyConfig", "LeRobotAgent"),
+    "diffusion": ("lerobot_policies", "LeRobotPolicyConfig", "LeRobotAgent"),
+}
 
+
+def _module(method: str):
     check_method(method)
-    return {"taco": taco, "gail": gail, "act": lerobot_policies, "diffusion": lerobot_policies}.get(method, bc)
+    return importlib.import_module(f"hsp.baselines.{_PARTS[method][0]}")
 
 
 def config_class(method: str) -> type:
     """The configuration dataclass of ``method`` (its section ``baselines.METHOD`` of params.yaml)."""
-    from hsp.baselines.common import BaselineConfig
-    from hsp.baselines.gail import GailConfig
-    from hsp.baselines.lerobot_policies import LeRobotPolicyConfig
-
-    check_method(method)
-    return {"gail": GailConfig, "act": LeRobotPolicyConfig, "diffusion": LeRobotPolicyConfig}.get(method,
-                                                                                                  BaselineConfig)
+    return getattr(_module(method), _PARTS[method][1])
 
 
 def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cfg, seed: int,
@@ -72,6 +75,8 @@ def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cf
     elif method == "gail":
         from hsp.evaluation.env import EnvConfig, HspEnv
 
+        if env is not None and env.fps != demos.fps:
+            raise HspError(f"{dataset_dir}: recorded at {demos.fps} fps, the environment runs at {env.fps} (record.fps)")
         model, report = module.train(demos, task, partial(HspEnv, task, env or EnvConfig(fps=demos.fps)), cfg, seed)
     else:
         model, report = module.train(demos, task.names, method, cfg, seed)
@@ -87,6 +92,4 @@ def load_agent(task: Task, method: str, model_dir: Path | None, fps: int):
     model = module.load(model_dir, method)
     if model.fps != fps:
         raise HspError(f"{model_dir}: trained on {model.fps} fps demonstrations, the environment runs at {fps}")
-    agent = {"taco": "TacoAgent", "gail": "GailAgent", "act": "LeRobotAgent", "diffusion": "LeRobotAgent"}.get(method,
-                                                                                                      "BCAgent")
-    return getattr(module, agent)(model, task, str(model_dir))
+    return getattr(module, _PARTS[method][2])(model, task, str(model_dir))

@@ -1,4 +1,4 @@
-"""``hsp train|eval --method bc|bc-rnn`` end to end on a tiny dataset, and the refusals."""
+"""``hsp train|eval --method bc|bc-rnn|taco|act`` end to end on a tiny dataset, and the refusals."""
 
 import json
 
@@ -22,10 +22,14 @@ def dataset(tmp_path_factory):
     return tmp / "ds"
 
 
-@pytest.mark.parametrize("method", ["bc", "bc-rnn", "taco"])
+TINY = {"bc": "hidden: 16", "bc-rnn": "hidden: 16", "taco": "hidden: 16",
+        "act": "policy: {dim_model: 16, dim_feedforward: 16, n_heads: 2, latent_dim: 4, chunk_size: 4, n_action_steps: 4}"}
+
+
+@pytest.mark.parametrize("method", TINY)
 def test_train_then_eval_closed_loop(dataset, tmp_path, method):
     params = tmp_path / "params.yaml"
-    params.write_text(f"baselines:\n  {method}:\n    iterations: 20\n    hidden: 16\n    checkpoint_every: 10\n"
+    params.write_text(f"baselines:\n  {method}:\n    iterations: 20\n    {TINY[method]}\n    checkpoint_every: 10\n"
                       "eval:\n  max_steps:\n    stacking-1: 12\n")
     model, reports = tmp_path / "m", tmp_path / "reports"
     result = runner.invoke(app, ["train", "stacking-1", "--method", method, "--dataset", str(dataset), "--out", str(model),
@@ -33,7 +37,8 @@ def test_train_then_eval_closed_loop(dataset, tmp_path, method):
     assert result.exit_code == 0, result.output
     report = json.loads((reports / "stacking-1" / method / "train.json").read_text())
     assert report["method"] == method and report["config"]["iterations"] == 20 and report["episodes"] == 2
-    assert json.loads((model / "config.json").read_text())["train"]["hidden"] == 16
+    saved = json.loads((model / ("hsp.json" if method == "act" else "config.json")).read_text())["train"]
+    assert saved == report["config"]
     out = tmp_path / "r"
     result = runner.invoke(app, ["eval", "stacking-1", "--method", method, "--model", str(model), "--episodes", "2",
                                  "--runs", "1", "--workers", "1", "--videos", "0", "--out", str(out), "--params", str(params)])
@@ -63,7 +68,7 @@ def test_bad_input_is_one_line(dataset, tmp_path):
         (["eval", "stacking-2", "--method", "bc", "--model", str(model)], "not those of task 'stacking-2'"),
         (["eval", "stacking-1", "--method", "bc", "--model", str(tmp_path / "none")], "model directory not found"),
         (["eval", "stacking-1", "--method", "bc", "--model", str(dataset)], "not a trained bc model"),
-        (["eval", "stacking-1", "--method", "act", "--model", str(model)], "baseline 'act' is not built yet"),
+        (["eval", "stacking-1", "--method", "act", "--model", str(model)], "not a trained act model"),
         (["train", "stacking-1", "--method", "diffusion", "--dataset", str(dataset)], "baseline 'diffusion' is not built yet"),
     ]
     for args, message in cases:

@@ -1,21 +1,39 @@
-"""act and diffusion (LeRobot's policies, state only; not yet offered by `hsp train`, no
-toy test of their learning yet): batches laid out as LeRobot's dataset would, save -> load
-acts identically, LeRobot's own configuration errors one line."""
+"""act and diffusion (LeRobot's policies, state only): they learn the toy reach that an
+untrained policy fails, batches are laid out as LeRobot's dataset would, save -> load acts
+identically, LeRobot's own configuration errors are one line."""
 
 import numpy as np
 import pytest
 
 from hsp.baselines import lerobot_policies as lp
 from hsp.errors import HspError
-from tests.baselines.test_bc import toy_demonstrations, toy_layout
+from tests.baselines.test_bc import toy_demonstrations, toy_layout, toy_success_rate
 
 SMALL = {
     "act": {"dim_model": 64, "dim_feedforward": 128, "n_heads": 4, "n_encoder_layers": 1, "n_decoder_layers": 1,
-            "n_vae_encoder_layers": 1, "latent_dim": 8, "chunk_size": 5, "n_action_steps": 5, "optimizer_lr": 1e-3},
+            "n_vae_encoder_layers": 1, "latent_dim": 8, "chunk_size": 5, "n_action_steps": 5, "optimizer_lr": 1e-3, "dropout": 0.0},
     "diffusion": {"down_dims": [16, 32, 64], "n_obs_steps": 2, "horizon": 8, "n_action_steps": 4,
                   "noise_scheduler_type": "DDIM", "num_train_timesteps": 50, "num_inference_steps": 10,
                   "scheduler_warmup_steps": 10, "optimizer_lr": 1e-3, "diffusion_step_embed_dim": 32},
 }
+
+
+TOY = {"act": dict(iterations=1000, batch_size=64)}
+
+
+@pytest.mark.parametrize("method", ["act"])
+def test_learns_a_toy_reach_that_an_untrained_policy_fails(tasks, method):
+    task = tasks["stacking-1"]
+    demos = toy_demonstrations(task, 100, seed=0)
+    model, report = lp.train(demos, task.names, method, lp.LeRobotPolicyConfig(
+        **TOY[method], policy=SMALL[method], checkpoint_every=250), seed=0)
+    untrained, _ = lp.train(demos, task.names, method, lp.LeRobotPolicyConfig(
+        iterations=1, policy=SMALL[method], validation_every=0), seed=0)
+    held = demos.subset(list(range(4, 100, 5)))
+    assert report["validation_episodes"] == 20
+    assert report["validation_loss"] < 0.5 * lp.held_out_loss(untrained, held, seed=0)
+    assert toy_success_rate(lp.LeRobotAgent(untrained, task), task) == 0.0
+    assert toy_success_rate(lp.LeRobotAgent(model, task), task) >= 0.8
 
 
 def test_batch_clamps_to_the_episode_and_pads_what_lies_beyond_or_was_not_observed(tasks):
