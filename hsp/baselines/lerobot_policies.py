@@ -22,6 +22,8 @@ gripper closed above ½.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import logging
 from dataclasses import asdict, dataclass, field
@@ -235,7 +237,8 @@ def load(model_dir: Path, method: str) -> LeRobotModel:
         meta = json.loads((model_dir / HSP_FILE).read_text())
         if meta.get("method") != method:
             raise HspError(f"{model_dir}: a {meta.get('method') or 'non-baseline'} model, not {method}")
-        policy = _classes(method)[1].from_pretrained(model_dir)
+        with contextlib.redirect_stdout(io.StringIO()):  # LeRobot prints "Loading weights" per load
+            policy = _classes(method)[1].from_pretrained(model_dir)
         pre, post = make_pre_post_processors(policy.config, pretrained_path=str(model_dir))
     except (ValueError, KeyError, TypeError, RuntimeError, OSError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__

@@ -48,7 +48,8 @@ def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float, grasp_m: 
     the steps where r_t is still within ``grasp_m`` of r_s (the hand was already where it
     lifts from: a robot closes where the hand arrived, whatever the tracked hand's jitter at
     rest), and between two such runs of the same object when r_t stays within ``grasp_m``
-    all along (a pause while holding). Steps touching a lost pose continue a run."""
+    all along (a pause while holding). Steps touching a lost pose continue a run between
+    observed moving steps but neither start nor end one, and a lost r_t ends the look-back."""
     H, n = world.shape[:2]
     closed = np.zeros(H, bool)
     if H < 2:
@@ -62,11 +63,14 @@ def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float, grasp_m: 
     moving = move | ~observed
     for j in range(n - 1):
         edges = np.diff(np.r_[0, moving[:, j].astype(np.int8), 0])
-        runs = [(s, e) for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
-                if carried[s:e, j].any()]
+        runs = []
+        for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            seen = np.flatnonzero(move[s:e, j] & observed[s:e, j])
+            if carried[s:e, j].any():
+                runs.append((s + seen[0], s + seen[-1] + 1))
         for k, (s, e) in enumerate(runs):
             closed[s:e] = True
-            away = tracked[:, j] & (np.linalg.norm(r[:, j] - r[s, j], axis=-1) >= grasp_m)
+            away = ~tracked[:, j] | (np.linalg.norm(r[:, j] - r[s, j], axis=-1) >= grasp_m)
             closed[np.r_[-1, np.flatnonzero(away[:s])].max() + 1:s] = True
             if k + 1 < len(runs):
                 gap = slice(e, runs[k + 1][0])

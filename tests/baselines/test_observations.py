@@ -59,3 +59,13 @@ def test_gripper_closes_where_the_hand_came_to_rest_before_the_lift_whatever_its
     world[:, 1, 2] = 0.02 + np.maximum(0, np.arange(H) - 11) * 0.005
     grip = episode_arrays(world, np.zeros((H, 3), np.int64), ["none"] * 3, moving_m=0.002, grasp_m=0.01)[2]
     assert list(np.flatnonzero(grip)) == list(range(5, H))
+
+
+def test_lost_frames_before_a_lift_neither_start_the_carry_nor_extend_the_look_back():
+    """Block 1 is lost while the hand approaches (frames 0-4) and the frame before the lift;
+    the gripper closes only where both are seen together at the grasp."""
+    world = carry_episode()
+    status = np.zeros((30, 3), np.int64)
+    status[:5, 1] = status[9, 1] = TrackStatus.LOST
+    grip = episode_arrays(world, status, ["none"] * 3, moving_m=0.002, grasp_m=0.005)[2]
+    assert list(np.flatnonzero(grip)) == list(range(10, 22))
