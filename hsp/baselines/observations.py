@@ -65,8 +65,8 @@ def gripper_closed(world: np.ndarray, ok: np.ndarray, moving_m: float, grasp_m: 
         edges = np.diff(np.r_[0, moving[:, j].astype(np.int8), 0])
         runs = []
         for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            seen = np.flatnonzero(move[s:e, j] & observed[s:e, j])
             if carried[s:e, j].any():
+                seen = np.flatnonzero(move[s:e, j] & observed[s:e, j])
                 runs.append((s + seen[0], s + seen[-1] + 1))
         for k, (s, e) in enumerate(runs):
             closed[s:e] = True
