@@ -105,6 +105,9 @@ def dataset_stats(demos: Demonstrations) -> dict[str, dict[str, np.ndarray]]:
     for key, x, floor in ((STATE, obs[:, :POSE_FEATURES], OBS_MIN_STD), (ENV, obs[:, POSE_FEATURES:], OBS_MIN_STD),
                           (ACTION, act, ACT_MIN_STD)):
         lo, hi = x.min(0), x.max(0)
+        if key == ACTION:  # no step (a_t = 0) mid-range, not at an edge Diffusion's clipped sampling avoids
+            hi = np.maximum(np.abs(lo), np.abs(hi))
+            lo = -hi
         widen = np.maximum(2 * floor - (hi - lo), 0) / 2
         out[key] = {"mean": x.mean(0), "std": np.maximum(x.std(0), floor), "min": lo - widen, "max": hi + widen}
     return {k: {s: v.astype(np.float32) for s, v in d.items()} for k, d in out.items()}

@@ -75,3 +75,11 @@ def test_lerobot_configuration_errors_are_one_line():
         lp.policy_config("diffusion", 36, {"horizon": 12})  # not a multiple of 2^len(down_dims)
     with pytest.raises(HspError, match=r"baselines.act.policy: .*unexpected keyword"):
         lp.policy_config("act", 36, {"chunk": 5})
+
+
+def test_action_range_is_centred_on_no_step(tasks):
+    """Diffusion samples in [-1, 1] and avoids its edges: a_t = 0 must map mid-range, not to
+    an edge, even when the demonstrations only ever step one way (down, here)."""
+    stats = lp.dataset_stats(toy_demonstrations(tasks["stacking-1"], 10, seed=0))[lp.ACTION]
+    np.testing.assert_array_equal(stats["min"], -stats["max"])
+    assert (stats["max"] > 0).all()
