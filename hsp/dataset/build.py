@@ -26,22 +26,11 @@ from hsp.perception.episode import object_models, track_recording
 from hsp.perception.metrics import auc, episode_errors, match_identical
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
-from hsp.recording.reader import ReadOptions, read_recording
+from hsp.recording.reader import ReadOptions, find_recordings, read_recording
 from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
 POSE_SOURCES = ("tracker", "ground-truth")
-
-
-def list_recordings(recordings_dir: Path) -> list[Path]:
-    """Episode files (``*.mcap``) or rosbag2 directories under ``recordings_dir``, sorted."""
-    d = Path(recordings_dir)
-    if not d.is_dir():
-        raise HspError(f"{d}: recordings directory not found")
-    found = sorted(list(d.glob("*.mcap")) + [p for p in d.iterdir() if (p / "metadata.yaml").is_file()])
-    if not found:
-        raise HspError(f"{d}: no .mcap recordings or rosbag2 directories")
-    return found
 
 
 def _ground_truth_episodes(task: Task, recordings: list[Path], first: GroundTruth, fps: int) -> Iterator[EpisodePoses]:
@@ -157,7 +146,7 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     parse report and, for tracked poses, the tracking report."""
     if poses_from not in POSE_SOURCES:
         raise HspError(f"--poses-from {poses_from!r}: choose one of {', '.join(POSE_SOURCES)}")
-    recordings = list_recordings(recordings_dir)
+    recordings = find_recordings(recordings_dir)
     start = time.perf_counter()
     tracking = None
     if poses_from == "ground-truth":

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 from rich.progress import track
 
-from hsp.dataset.build import identical_groups, list_recordings
+from hsp.dataset.build import identical_groups
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
@@ -22,6 +22,7 @@ from hsp.labeling.metrics import label_metrics
 from hsp.labeling.priors import PriorConfig
 from hsp.perception.metrics import match_identical
 from hsp.recording.ground_truth import GroundTruth, read_ground_truth
+from hsp.recording.reader import find_recordings
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
@@ -98,7 +99,7 @@ def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfi
     with atomic_path(Path(out_file)) as tmp:
         labels_frame(labels).to_parquet(tmp, index=False)
     if recordings_dir is not None:
-        recs = list_recordings(recordings_dir)
+        recs = find_recordings(recordings_dir)
         if len(recs) != len(labels):
             raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(labels)} dataset episodes")
         truth, pred = [], []

@@ -45,11 +45,12 @@ def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray])
     identities (identical objects are matched by distance, as the label metrics do), and
     way-point frame k at the end of each annotated way-point's segment, where the tool has
     arrived (w_t = p_k[o+, o*], as the pseudo-labels define it)."""
-    from hsp.dataset.build import identical_groups, list_recordings
+    from hsp.dataset.build import identical_groups
     from hsp.perception.metrics import match_identical
     from hsp.recording.ground_truth import read_ground_truth
+    from hsp.recording.reader import find_recordings
 
-    recs = list_recordings(recordings_dir)
+    recs = find_recordings(recordings_dir)
     if len(recs) != len(poses):
         raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(poses)} dataset episodes")
     groups, out = identical_groups(task), []

@@ -1,15 +1,18 @@
 """Reading RGB-D recordings: what `ros2 bag record` writes from the RealSense ROS 2 driver,
 and what `hsp record` writes. The one reader `hsp parse` uses.
 
-Accepts an ``.mcap`` file or a rosbag2 directory (``metadata.yaml`` + ``*.mcap``). Finds
-colour, aligned depth and camera info by schema and by the driver's topic names (both
-``/camera/camera/...`` of realsense-ros ≥ 4.55 and the older ``/camera/...``), pairs colour
-and depth on ``header.stamp``, decodes ``rgb8``/``bgr8``/``rgba8``/``bgra8``,
-``16UC1``/``mono16`` (mm) and ``32FC1`` (m), honouring ``step`` and ``is_bigendian``.
+Reads a bare ``.mcap`` file, a rosbag2 directory (``metadata.yaml``) in MCAP or SQLite
+storage, uncompressed or compressed per message or per file, split or not, and a ROS 1
+``.bag``. MCAP data goes through hsp's own chunk-by-chunk scan, which keeps what survives
+damage (a truncated file keeps the complete chunks before the break; a chunk failing its
+CRC is skipped; both are reported as warnings); everything else through the maintained
+``rosbags`` reader, keeping the messages read before a break.
 
-Damaged files lose only what is damaged: a truncated file keeps the complete chunks before
-the break; a chunk failing its CRC is skipped. Both are reported as warnings. Ground-truth
-topics (``/hsp/ground_truth/*``) are never read here.
+Finds colour, aligned depth and camera info by message type and by the driver's topic
+names (both ``/camera/camera/...`` of realsense-ros ≥ 4.55 and the older ``/camera/...``),
+pairs colour and depth on ``header.stamp``, decodes ``rgb8``/``bgr8``/``rgba8``/``bgra8``,
+``16UC1``/``mono16`` (mm) and ``32FC1`` (m), honouring ``step`` and ``is_bigendian``.
+Ground-truth topics (``/hsp/ground_truth/*``) are never read here.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import zstandard
 from mcap.exceptions import McapError
 from mcap.records import Channel, Chunk, Message, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -31,14 +35,14 @@ from hsp.recording.messages import GROUND_TRUTH_PREFIX
 log = logging.getLogger(__name__)
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-_FOREIGN_MAGIC = {
-    b"SQLite format 3\x00": "a rosbag2 SQLite (.db3) file; convert it with `ros2 bag convert` to the mcap storage",
-    b"#ROSBAG V2.0": "a ROS 1 bag; convert it to ROS 2 MCAP (e.g. `rosbags-convert --dst-storage mcap`)",
-    b"PK\x03\x04": "a zip archive; unpack it first",
-}
+ROS1_MAGIC = b"#ROSBAG V2.0"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+_FOREIGN_MAGIC = {b"PK\x03\x04": "a zip archive; unpack it first", b"\x89PNG": "a PNG image"}
+RECORDING_SUFFIXES = (".mcap", ".bag")
 IMAGE_SCHEMA = "sensor_msgs/msg/Image"
 INFO_SCHEMA = "sensor_msgs/msg/CameraInfo"
 TF_SCHEMA = "tf2_msgs/msg/TFMessage"
+READ_TYPES = (IMAGE_SCHEMA, INFO_SCHEMA, TF_SCHEMA)
 COLOR_ENCODINGS = {"rgb8": (3, [0, 1, 2]), "bgr8": (3, [2, 1, 0]), "rgba8": (4, [0, 1, 2]), "bgra8": (4, [2, 1, 0])}
 DEPTH_ENCODINGS = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}
 
@@ -61,6 +65,7 @@ class ReadReport:
     paired: int = 0
     paired_nearest: int = 0
     skipped_chunks: int = 0
+    skipped_messages: int = 0
     truncated: bool = False
     warnings: list[str] = field(default_factory=list)
 
@@ -89,23 +94,38 @@ class Recording:
     report: ReadReport
 
 
-def _mcap_files(path: Path) -> list[Path]:
-    if path.is_dir():
-        files = sorted(path.glob("*.mcap"))
-        if not files:
-            found = ", ".join(sorted(p.name for p in path.iterdir())[:8]) or "nothing"
-            raise HspError(f"{path}: a directory without .mcap files (found: {found})")
-        return files
-    if not path.is_file():
-        raise HspError(f"{path}: no such file or directory")
-    return [path]
+def is_bag_directory(path: Path) -> bool:
+    return path.is_dir() and (path / "metadata.yaml").is_file()
 
 
-def _check_magic(path: Path) -> None:
+def find_recordings(path: Path) -> list[Path]:
+    """The recordings ``path`` names: one rosbag2 directory, ``.mcap`` file or ROS 1 ``.bag``
+    file, or a folder of them (sorted)."""
+    path = Path(path)
+    if not path.exists():
+        raise HspError(f"{path}: recordings not found")
+    if path.is_file() or is_bag_directory(path):
+        return [path]
+    found = sorted(p for p in path.iterdir() if (p.is_file() and p.suffix in RECORDING_SUFFIXES) or is_bag_directory(p))
+    if found:
+        return found
+    if any(path.glob("*.db3")) or any(path.glob("*/*.db3")) or any(path.glob("*/*.mcap")):
+        raise HspError(f"{path}: a rosbag2 directory without metadata.yaml (a recording that was cut short?); "
+                       "restore it with `ros2 bag reindex DIR`")
+    names = ", ".join(sorted(p.name for p in path.iterdir())[:8]) or "nothing"
+    raise HspError(f"{path}: no recordings (.mcap or .bag files, rosbag2 directories with metadata.yaml); found: {names}")
+
+
+def _magic(path: Path) -> bytes:
     with open(path, "rb") as f:
         head = f.read(16)
     if not head:
         raise HspError(f"{path}: empty file")
+    return head
+
+
+def _check_mcap(path: Path) -> None:
+    head = _magic(path)
     if head.startswith(MCAP_MAGIC):
         return
     for magic, what in _FOREIGN_MAGIC.items():
@@ -136,7 +156,7 @@ def _scan(path: Path, report: ReadReport) -> tuple[dict[int, Schema], dict[int, 
                 if isinstance(record, Chunk):
                     try:
                         take(breakup_chunk(record, validate_crc=True))
-                    except (McapError, ValueError) as e:
+                    except (McapError, ValueError, zstandard.ZstdError, RuntimeError) as e:  # lz4 raises RuntimeError
                         report.skipped_chunks += 1
                         report.warn(f"{path}: skipped a corrupt chunk at log time {record.message_start_time} ({e})")
                 else:
@@ -147,20 +167,134 @@ def _scan(path: Path, report: ReadReport) -> tuple[dict[int, Schema], dict[int, 
     return schemas, channels, messages
 
 
-def _pick(channels: dict[int, Channel], schemas: dict[int, Schema], schema: str, prefer: list[str], override: str | None,
-          what: str, path: Path, report: ReadReport) -> Channel | None:
-    cands = [c for c in channels.values() if c.schema_id in schemas and schemas[c.schema_id].name == schema
-             and not c.topic.startswith(GROUND_TRUTH_PREFIX)]
+@dataclass
+class _Messages:
+    """The messages of one recording that hsp reads (images, camera info, ``/tf_static``), decoded."""
+
+    types: dict[str, str]
+    """Every topic's message type, e.g. ``sensor_msgs/msg/Image``."""
+    messages: list[tuple[str, int, object]]
+    """(topic, log time in ns, message), in the order stored."""
+
+
+def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_messages: bool) -> _Messages:
+    """MCAP files (a bare ``.mcap`` or the files of a rosbag2 MCAP bag) with hsp's own scan,
+    which keeps what survives damage. ``compressed_messages``: rosbag2's per-message zstd."""
+    out = _Messages({}, [])
+    factory, decoders = DecoderFactory(), {}
+    unzip = zstandard.ZstdDecompressor()
+    bad = 0
+    for f in files:
+        _check_mcap(f)
+        schemas, channels, messages = _scan(f, report)
+        for m in messages:
+            ch = channels.get(m.channel_id)
+            schema = schemas.get(ch.schema_id) if ch is not None else None
+            if schema is None:
+                continue
+            out.types[ch.topic] = schema.name
+            if schema.name not in READ_TYPES or ch.topic.startswith(GROUND_TRUTH_PREFIX):
+                continue
+            key = (f, ch.id)
+            if key not in decoders:
+                decoders[key] = factory.decoder_for(ch.message_encoding, schema)
+                if decoders[key] is None:
+                    raise HspError(f"{path}: cannot decode {ch.topic} ({ch.message_encoding}, {schema.encoding})")
+            try:
+                data = unzip.decompress(m.data) if compressed_messages else m.data
+                out.messages.append((ch.topic, m.log_time, decoders[key](data)))
+            except (zstandard.ZstdError, ValueError, IndexError, EOFError) as e:
+                bad += 1
+                if bad == 1:
+                    report.warn(f"{f}: skipped a message of {ch.topic} that does not decode ({type(e).__name__})")
+    report.skipped_messages += bad
+    return out
+
+
+def _read_rosbags(path: Path, report: ReadReport) -> _Messages:
+    """A rosbag2 directory in SQLite storage or compressed per file, or a ROS 1 bag, through
+    the ``rosbags`` reader; messages before a break are kept."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    out = _Messages({}, [])
+    # Any failure of the third-party reader on this file is a fault of the file: one line naming it.
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except Exception as e:  # noqa: BLE001
+        raise HspError(f"{path}: cannot read the bag ({_first_line(e)})") from None
+    try:
+        out.types = {c.topic: c.msgtype for c in reader.connections}
+        wanted = [c for c in reader.connections if c.msgtype in READ_TYPES and not c.topic.startswith(GROUND_TRUTH_PREFIX)]
+        try:
+            for c, t, raw in reader.messages(connections=wanted):
+                out.messages.append((c.topic, t, reader.deserialize(raw, c.msgtype)))
+        except Exception as e:  # noqa: BLE001
+            report.truncated = True
+            report.warn(f"{path}: damaged after {len(out.messages)} messages ({_first_line(e)}); keeping them")
+    finally:
+        reader.close()
+    return out
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip()
+    return f"{type(e).__name__}: {text.splitlines()[0]}" if text else type(e).__name__
+
+
+def _read_messages(path: Path, report: ReadReport) -> _Messages:
+    """Dispatch on what ``path`` is; see the module docstring."""
+    if not path.exists():
+        raise HspError(f"{path}: no such file or directory")
+    if path.is_dir():
+        if not is_bag_directory(path):
+            raise HspError(f"{path}: a directory without metadata.yaml is not a rosbag2 bag "
+                           "(name the .mcap files, or restore it with `ros2 bag reindex`)")
+        meta = _bag_metadata(path)
+        storage, mode = meta.get("storage_identifier"), str(meta.get("compression_mode") or "").lower()
+        if storage == "mcap" and mode != "file":
+            files = [path / Path(f).name for f in meta.get("relative_file_paths") or []]
+            if missing := [f.name for f in files if not f.is_file()]:
+                raise HspError(f"{path}: metadata.yaml lists files that are missing: {missing}")
+            if mode == "message" and meta.get("compression_format") != "zstd":
+                raise HspError(f"{path}: compression {meta.get('compression_format')!r} is not supported (zstd is)")
+            return _read_mcap(files, path, report, compressed_messages=mode == "message")
+        return _read_rosbags(path, report)
+    head = _magic(path)
+    if head.startswith(ROS1_MAGIC):
+        if path.suffix != ".bag":
+            raise HspError(f"{path}: a ROS 1 bag without the .bag suffix; rename it to {path.stem}.bag")
+        return _read_rosbags(path, report)
+    if head.startswith(SQLITE_MAGIC):
+        raise HspError(f"{path}: a rosbag2 SQLite file; name its bag directory (with metadata.yaml), not the .db3")
+    return _read_mcap([path], path, report, compressed_messages=False)
+
+
+def _bag_metadata(path: Path) -> dict:
+    import yaml
+
+    try:
+        meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        if not isinstance(meta, dict):
+            raise TypeError("not a mapping")
+    except (yaml.YAMLError, KeyError, TypeError, OSError) as e:
+        raise HspError(f"{path / 'metadata.yaml'}: not rosbag2 metadata ({_first_line(e)})") from None
+    return meta
+
+
+def _pick(types: dict[str, str], msgtype: str, prefer: list[str], override: str | None, what: str, path: Path,
+          report: ReadReport) -> str | None:
+    cands = sorted(t for t, ty in types.items() if ty == msgtype and not t.startswith(GROUND_TRUTH_PREFIX))
     if override is not None:
-        for c in cands:
-            if c.topic == override:
-                return c
-        raise HspError(f"{path}: no {schema} topic {override!r} (found: {', '.join(sorted(c.topic for c in cands)) or 'none'})")
+        if override in cands:
+            return override
+        raise HspError(f"{path}: no {msgtype} topic {override!r} (found: {', '.join(cands) or 'none'})")
     for suffix in prefer:
-        hits = [c for c in cands if c.topic.endswith(suffix)]
+        hits = [t for t in cands if t.endswith(suffix)]
         if hits:
             if len(hits) > 1:
-                report.warn(f"{path}: several {what} topics {[c.topic for c in hits]}; using {hits[0].topic}")
+                report.warn(f"{path}: several {what} topics {hits}; using {hits[0]}")
             return hits[0]
     return None
 
@@ -207,73 +341,50 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
     """Read and pair the RGB-D frames of one recording (see module docstring)."""
     path = Path(path)
     report = ReadReport()
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    messages: list[Message] = []
-    for f in _mcap_files(path):
-        _check_magic(f)
-        s, c, m = _scan(f, report)
-        schemas.update(s)
-        channels.update(c)
-        messages += m
-    if not messages:
+    bag = _read_messages(path, report)
+    if not bag.types:
         raise HspError(f"{path}: no readable messages")
 
-    color = _pick(channels, schemas, IMAGE_SCHEMA, ["/color/image_raw", "/color/image_rect_raw", "/color/image"],
+    color = _pick(bag.types, IMAGE_SCHEMA, ["/color/image_raw", "/color/image_rect_raw", "/color/image"],
                   options.color_topic, "colour", path, report)
-    depth = _pick(channels, schemas, IMAGE_SCHEMA, ["aligned_depth_to_color/image_raw", "depth/image_rect_raw", "depth/image_raw"],
+    depth = _pick(bag.types, IMAGE_SCHEMA, ["aligned_depth_to_color/image_raw", "depth/image_rect_raw", "depth/image_raw"],
                   options.depth_topic, "depth", path, report)
     if color is None or depth is None:
-        images = sorted(c.topic for c in channels.values() if schemas.get(c.schema_id) and schemas[c.schema_id].name == IMAGE_SCHEMA)
-        others = sorted({c.topic for c in channels.values()})
+        images = sorted(t for t, ty in bag.types.items() if ty == IMAGE_SCHEMA)
         missing = "colour" if color is None else "depth"
-        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; all topics: {others}"
+        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; all topics: {sorted(bag.types)}"
                        " (name them with --color-topic/--depth-topic)")
-    if "aligned_depth_to_color" not in depth.topic and options.depth_topic is None:
-        aligned = [c.topic for c in channels.values() if "aligned_depth_to_color" in c.topic]
-        if not aligned:
-            report.warn(f"{path}: depth topic {depth.topic} is not the aligned one; it must be registered to colour")
-    info = _pick(channels, schemas, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path, report)
-
-    factory = DecoderFactory()
-    decoders = {}
-
-    def decode(m: Message) -> object:
-        ch = channels[m.channel_id]
-        if ch.id not in decoders:
-            decoders[ch.id] = factory.decoder_for(ch.message_encoding, schemas[ch.schema_id])
-            if decoders[ch.id] is None:
-                raise HspError(f"{path}: cannot decode {ch.topic} ({ch.message_encoding}, {schemas[ch.schema_id].encoding})")
-        return decoders[ch.id](m.data)
+    if "aligned_depth_to_color" not in depth and options.depth_topic is None:
+        if not any("aligned_depth_to_color" in t for t in bag.types):
+            report.warn(f"{path}: depth topic {depth} is not the aligned one; it must be registered to colour")
+    info = _pick(bag.types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path, report)
 
     colour_frames: dict[int, np.ndarray] = {}
     depth_frames: dict[int, np.ndarray] = {}
+    colour_log_times: list[int] = []
     K = None
     info_size = None
     frame_id = ""
     static: dict[str, tuple[str, np.ndarray]] = {}
-    for m in messages:
-        cid = m.channel_id
-        if cid == color.id or cid == depth.id:
-            msg = decode(m)
+    for topic, log_time, msg in bag.messages:
+        if topic == color or topic == depth:
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec  # type: ignore[attr-defined]
             kind, img = _image(msg, path)
-            if cid == color.id:
+            if topic == color:
                 if kind != "color":
-                    raise HspError(f"{path}: colour topic {color.topic} carries {msg.encoding!r}")  # type: ignore[attr-defined]
+                    raise HspError(f"{path}: colour topic {color} carries {msg.encoding!r}")  # type: ignore[attr-defined]
                 colour_frames[stamp] = img
+                colour_log_times.append(log_time)
                 frame_id = msg.header.frame_id  # type: ignore[attr-defined]
             else:
                 if kind != "depth":
-                    raise HspError(f"{path}: depth topic {depth.topic} carries {msg.encoding!r}")  # type: ignore[attr-defined]
+                    raise HspError(f"{path}: depth topic {depth} carries {msg.encoding!r}")  # type: ignore[attr-defined]
                 depth_frames[stamp] = img
-        elif info is not None and cid == info.id and K is None:
-            msg = decode(m)
-            K = np.asarray(msg.k, float).reshape(3, 3)  # type: ignore[attr-defined]
+        elif topic == info and K is None:
+            K = np.asarray(msg.k if hasattr(msg, "k") else msg.K, float).reshape(3, 3)  # type: ignore[attr-defined]  # ROS 1: K
             info_size = (msg.height, msg.width)  # type: ignore[attr-defined]
-        elif schemas.get(channels[cid].schema_id) is not None and schemas[channels[cid].schema_id].name == TF_SCHEMA \
-                and channels[cid].topic == "/tf_static":
-            for tf in decode(m).transforms:  # type: ignore[attr-defined]
+        elif topic == "/tf_static" and bag.types[topic] == TF_SCHEMA:
+            for tf in msg.transforms:  # type: ignore[attr-defined]
                 static[tf.child_frame_id] = (tf.header.frame_id, _tf_pose(tf))
     report.color_messages, report.depth_messages = len(colour_frames), len(depth_frames)
     if not colour_frames or not depth_frames:
@@ -315,7 +426,7 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
                        f"(median stamp offset {np.median(offsets) / 1e6:.1f} ms)")
     if len(pairs) < len(c_stamps) or len(pairs) < len(d_stamps):
         report.warn(f"{path}: {len(c_stamps) - len(pairs)} colour and {len(d_stamps) - len(pairs)} depth frames left unpaired")
-    if np.any(np.diff([m.log_time for m in messages if m.channel_id == color.id]) < 0):
+    if np.any(np.diff(colour_log_times) < 0):
         report.warn(f"{path}: colour messages are not in time order; sorted by header.stamp")
 
     depth_arr = np.stack([depth_frames[d] for _, d in pairs])
@@ -330,6 +441,6 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
         K=K,
         frame_id=frame_id,
         T_world_cam=_camera_pose(static, frame_id),
-        topics={"color": color.topic, "depth": depth.topic, "info": info.topic if info else ""},
+        topics={"color": color, "depth": depth, "info": info or ""},
         report=report,
     )

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hsp.dataset.build import list_recordings
+from hsp.recording.reader import find_recordings
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.recording.ground_truth import matching_ground_truth
@@ -43,7 +43,7 @@ def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Pa
     poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
     if not 0 <= episode < len(poses):
         raise HspError(f"{dataset_dir}: no episode {episode} (the dataset has 0–{len(poses) - 1})")
-    recordings = list_recordings(recordings_dir)
+    recordings = find_recordings(recordings_dir)
     if len(recordings) != len(poses):
         raise HspError(f"{recordings_dir}: {len(recordings)} recordings for {len(poses)} dataset episodes")
     rec = read_recording(recordings[episode])

@@ -57,7 +57,7 @@ def test_bad_input_is_one_line(dataset, tmp_path):
     cases = [
         (["eval", "stacking-1", "--method", "gail", "--model", str(model)], "not a trained gail model"),
         (["train", "stacking-1", "--method", "taco", "--dataset", str(dataset), "--recordings", str(tmp_path)],
-         "no .mcap recordings or rosbag2 directories"),
+         "no recordings (.mcap or .bag files"),
         (["eval", "stacking-1", "--method", "taco", "--model", str(model)], "a bc model, not taco"),
         (["train", "stacking-1", "--method", "dagger", "--dataset", str(dataset)], "unknown method 'dagger'; valid methods: proposed, supervised, bc"),
         (["train", "stacking-1", "--method", "bc", "--dataset", str(tmp_path)], "not a LeRobot dataset"),

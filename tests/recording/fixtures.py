@@ -47,29 +47,112 @@ def write_bag(path: Path, n: int = 10, *, color: bool = True, depth: bool = True
     return rgb, depth_mm
 
 
-def write_rosbags_bag(directory: Path, n: int = 6, prefix: str = "/camera/camera") -> tuple[np.ndarray, np.ndarray]:
-    """A rosbag2 directory (metadata.yaml + .mcap) written by the ``rosbags`` package, with
-    big-endian depth rows padded beyond their width (``step`` > width × 2)."""
+DRIVER_TF = [("camera_link", "camera_color_frame", [0.0, 0.015, 0.0], [0.0, 0.0, 0.0, 1.0]),
+             ("camera_color_frame", "camera_color_optical_frame", [0.0, 0.0, 0.0], [-0.5, 0.5, -0.5, 0.5])]
+"""``/tf_static`` as the RealSense driver publishes it: the camera's own frames, no table or world."""
+
+
+def write_rosbags_bag(directory: Path, n: int = 6, prefix: str = "/camera/camera", *, storage: str = "mcap",
+                      compression: str | None = None, split: bool = False, tf: list | None = None,
+                      rgb: np.ndarray | None = None, depth_mm: np.ndarray | None = None, cam: CameraConfig = CAM,
+                      encoding: str = "rgb8", period_ns: int = PERIOD, stamps_ns: np.ndarray | None = None,
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """A rosbag2 directory written by the ``rosbags`` package as ``ros2 bag record`` writes
+    it: ``storage`` "mcap" or "sqlite3", ``compression`` None, "message" or "file" (zstd),
+    ``split`` into two files, ``tf`` transforms (parent, child, xyz, xyzw) on ``/tf_static``.
+    Depth is big-endian with rows padded beyond their width (``step`` > width × 2). Returns
+    the colour and depth (mm) that went in (random unless given)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    Image, Header, Time = ts.types["sensor_msgs/msg/Image"], ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
-    CameraInfo, Roi = ts.types["sensor_msgs/msg/CameraInfo"], ts.types["sensor_msgs/msg/RegionOfInterest"]
-    rgb, depth_mm = frames(n, seed=1)
-    with Writer(directory, version=8, storage_plugin=StoragePlugin.MCAP) as w:
-        c_img = w.add_connection(f"{prefix}/color/image_raw", Image.__msgtype__, typestore=ts)
-        c_dep = w.add_connection(f"{prefix}/aligned_depth_to_color/image_raw", Image.__msgtype__, typestore=ts)
-        c_inf = w.add_connection(f"{prefix}/color/camera_info", CameraInfo.__msgtype__, typestore=ts)
+    T = ts.types
+    Image, Header, Time = T["sensor_msgs/msg/Image"], T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    CameraInfo, Roi = T["sensor_msgs/msg/CameraInfo"], T["sensor_msgs/msg/RegionOfInterest"]
+    if rgb is None:
+        rgb, depth_mm = frames(n, seed=1)
+    n, h, w = rgb.shape[:3]
+    stamps = np.asarray(stamps_ns if stamps_ns is not None else 1_700_000_000_000_000_000 + np.arange(n) * period_ns)
+    parts = [range(n // 2), range(n // 2, n)] if split else [range(n)]
+    for k, part in enumerate(parts):
+        writer = Writer(directory if k == 0 else directory.with_name(directory.name + f"_{k}"), version=8,
+                        storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+        if compression:
+            writer.set_compression(CompressionMode[compression.upper()], CompressionFormat.ZSTD)
+        with writer as wr:
+            c_img = wr.add_connection(f"{prefix}/color/image_raw", Image.__msgtype__, typestore=ts)
+            c_dep = wr.add_connection(f"{prefix}/aligned_depth_to_color/image_raw", Image.__msgtype__, typestore=ts)
+            c_inf = wr.add_connection(f"{prefix}/color/camera_info", CameraInfo.__msgtype__, typestore=ts)
+            if tf and k == 0:
+                TFMessage, Stamped = T["tf2_msgs/msg/TFMessage"], T["geometry_msgs/msg/TransformStamped"]
+                Tf, V3, Q = T["geometry_msgs/msg/Transform"], T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+                c_tf = wr.add_connection("/tf_static", TFMessage.__msgtype__, typestore=ts)
+                msg = TFMessage([Stamped(Header(Time(sec=int(stamps[0] // 10**9), nanosec=0), parent), child,
+                                         Tf(V3(*map(float, xyz)), Q(*map(float, q)))) for parent, child, xyz, q in tf])
+                wr.write(c_tf, int(stamps[0]), ts.serialize_cdr(msg, TFMessage.__msgtype__))
+            for t in part:
+                ns = int(stamps[t])
+                hdr = Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="camera_color_optical_frame")
+                log_time = ns + 5_000_000  # the recorder's clock, later than the stamp
+                img = rgb[t][:, :, ::-1] if encoding == "bgr8" else rgb[t]
+                wr.write(c_img, log_time, ts.serialize_cdr(Image(hdr, h, w, encoding, 0, w * 3, np.ascontiguousarray(img).reshape(-1)),
+                                                           Image.__msgtype__))
+                padded = np.zeros((h, w * 2 + 8), np.uint8)
+                padded[:, : w * 2] = depth_mm[t].astype(">u2").view(np.uint8).reshape(h, w * 2)
+                wr.write(c_dep, log_time + 1000, ts.serialize_cdr(Image(hdr, h, w, "16UC1", 1, w * 2 + 8, padded.reshape(-1)),
+                                                                  Image.__msgtype__))
+                info = CameraInfo(hdr, h, w, "plumb_bob", np.zeros(5), cam.K.ravel(), np.eye(3).ravel(),
+                                  np.concatenate([cam.K, np.zeros((3, 1))], 1).ravel(), 0, 0, Roi(0, 0, 0, 0, False))
+                wr.write(c_inf, log_time, ts.serialize_cdr(info, CameraInfo.__msgtype__))
+    if split:
+        _merge_split(directory, directory.with_name(directory.name + "_1"))
+    return rgb, depth_mm
+
+
+def _merge_split(first: Path, second: Path) -> None:
+    """Make ``first`` a split bag of two files, as ``ros2 bag record --max-bag-size`` does."""
+    import yaml
+
+    meta_path = first / "metadata.yaml"
+    meta, meta2 = (yaml.safe_load((d / "metadata.yaml").read_text()) for d in (first, second))
+    info, info2 = meta["rosbag2_bagfile_information"], meta2["rosbag2_bagfile_information"]
+    (f2,) = info2["relative_file_paths"]
+    name = f"{first.name}_1{Path(f2).suffix if not f2.endswith('.zstd') else ''.join(Path(f2).suffixes[-2:])}"
+    (second / Path(f2).name).rename(first / name)
+    info["relative_file_paths"].append(name)
+    info["files"].append({**info2["files"][0], "path": name})
+    counts = {t["topic_metadata"]["name"]: t["message_count"] for t in info2["topics_with_message_count"]}
+    for t in info["topics_with_message_count"]:
+        t["message_count"] += counts.get(t["topic_metadata"]["name"], 0)
+    info["message_count"] += info2["message_count"]
+    meta_path.write_text(yaml.safe_dump(meta))
+    for f in second.iterdir():
+        f.unlink()
+    second.rmdir()
+
+
+def write_ros1_bag(path: Path, n: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """A ROS 1 ``.bag`` as the RealSense ROS 1 driver's topics are recorded by ``rosbag record``."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    T = ts.types
+    Image, Header, Time = T["sensor_msgs/msg/Image"], T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    CameraInfo, Roi = T["sensor_msgs/msg/CameraInfo"], T["sensor_msgs/msg/RegionOfInterest"]
+    rgb, depth_mm = frames(n, seed=2)
+    with Writer(path) as w:
+        c_img = w.add_connection("/camera/color/image_raw", Image.__msgtype__, typestore=ts)
+        c_dep = w.add_connection("/camera/aligned_depth_to_color/image_raw", Image.__msgtype__, typestore=ts)
+        c_inf = w.add_connection("/camera/color/camera_info", CameraInfo.__msgtype__, typestore=ts)
         for t in range(n):
             ns = 1_700_000_000_000_000_000 + t * PERIOD
-            hdr = Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="camera_color_optical_frame")
-            log_time = ns + 5_000_000  # the recorder's clock, later than the stamp
-            w.write(c_img, log_time, ts.serialize_cdr(Image(hdr, H, W, "rgb8", 0, W * 3, rgb[t].reshape(-1)), Image.__msgtype__))
-            padded = np.zeros((H, W * 2 + 8), np.uint8)
-            padded[:, : W * 2] = depth_mm[t].astype(">u2").view(np.uint8).reshape(H, W * 2)
-            w.write(c_dep, log_time + 1000, ts.serialize_cdr(Image(hdr, H, W, "16UC1", 1, W * 2 + 8, padded.reshape(-1)), Image.__msgtype__))
+            hdr = Header(seq=t, stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="camera_color_optical_frame")
+            w.write(c_img, ns, ts.serialize_ros1(Image(hdr, H, W, "rgb8", 0, W * 3, rgb[t].reshape(-1)), Image.__msgtype__))
+            w.write(c_dep, ns, ts.serialize_ros1(Image(hdr, H, W, "16UC1", 0, W * 2, depth_mm[t].view(np.uint8).reshape(-1)),
+                                                 Image.__msgtype__))
             info = CameraInfo(hdr, H, W, "plumb_bob", np.zeros(5), CAM.K.ravel(), np.eye(3).ravel(),
                               np.concatenate([CAM.K, np.zeros((3, 1))], 1).ravel(), 0, 0, Roi(0, 0, 0, 0, False))
-            w.write(c_inf, log_time, ts.serialize_cdr(info, CameraInfo.__msgtype__))
+            w.write(c_inf, ns, ts.serialize_ros1(info, CameraInfo.__msgtype__))
     return rgb, depth_mm

@@ -9,7 +9,7 @@ from hsp.recording.record import RecordConfig, record
 from hsp.recording.writer import CameraRig
 from hsp.sim.camera import CameraConfig
 from hsp.sim.depth_noise import DepthNoiseConfig
-from tests.recording.fixtures import CAM, write_bag, write_rosbags_bag
+from tests.recording.fixtures import CAM, write_bag, write_ros1_bag, write_rosbags_bag
 
 
 def test_colour_and_depth_round_trip_bit_exactly(tmp_path):
@@ -56,7 +56,9 @@ def test_empty_file(tmp_path):
         read_recording(tmp_path / "e.mcap")
 
 
-@pytest.mark.parametrize(("magic", "hint"), [(b"SQLite format 3\x00", "db3"), (b"#ROSBAG V2.0\n", "ROS 1 bag"), (b"hello", "not an MCAP")])
+@pytest.mark.parametrize(("magic", "hint"), [
+    (b"SQLite format 3\x00", "SQLite file; name its bag directory"), (b"#ROSBAG V2.0\n", "ROS 1 bag without the .bag suffix"),
+    (b"\x89PNG\r\n\x1a\n", "not MCAP but a PNG image"), (b"hello", "not an MCAP")])
 def test_not_mcap(tmp_path, magic, hint):
     (tmp_path / "x.mcap").write_bytes(magic + b"\x00" * 64)
     with pytest.raises(HspError, match=hint):
@@ -131,3 +133,23 @@ def test_override_topic_names(tmp_path):
         read_recording(tmp_path / "r.mcap")
     rec = read_recording(tmp_path / "r.mcap", ReadOptions(color_topic="/my_cam/rgb"))
     assert rec.topics["color"] == "/my_cam/rgb"
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+@pytest.mark.parametrize("compression", [None, "message", "file"])
+def test_rosbag2_as_ros2_bag_record_writes_it(tmp_path, storage, compression):
+    """Both storages, each compression mode, split in two files: every frame comes back."""
+    rgb, depth_mm = write_rosbags_bag(tmp_path / "bag", n=6, storage=storage, compression=compression, split=True)
+    rec = read_recording(tmp_path / "bag")
+    np.testing.assert_array_equal(rec.rgb, rgb)
+    np.testing.assert_array_equal(np.round(rec.depth * 1000).astype(np.uint16), depth_mm)
+    np.testing.assert_array_equal(rec.K, CAM.K)
+    assert rec.report.warnings == []
+
+
+def test_ros1_bag(tmp_path):
+    rgb, depth_mm = write_ros1_bag(tmp_path / "a.bag")
+    rec = read_recording(tmp_path / "a.bag")
+    np.testing.assert_array_equal(rec.rgb, rgb)
+    np.testing.assert_array_equal(np.round(rec.depth * 1000).astype(np.uint16), depth_mm)
+    np.testing.assert_array_equal(rec.K, CAM.K)
