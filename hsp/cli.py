@@ -8,6 +8,7 @@ reason on bad input.
 from __future__ import annotations
 
 import logging
+import math
 import sys
 from pathlib import Path
 from typing import Optional
@@ -120,6 +121,18 @@ def _intrinsics(text: Optional[str]) -> Optional[tuple[float, float, float, floa
     return fx, fy, cx, cy
 
 
+def _pose(text: Optional[str]) -> Optional[tuple[float, ...]]:
+    if text is None:
+        return None
+    try:
+        pose = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        pose = ()
+    if len(pose) != 7 or not all(math.isfinite(v) for v in pose) or abs(math.hypot(*pose[3:]) - 1) > 1e-3:
+        raise HspError(f"--camera-pose {text!r}: expected seven numbers x,y,z,qx,qy,qz,qw (m; a unit quaternion)")
+    return pose
+
+
 @app.command()
 def parse(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
@@ -131,11 +144,18 @@ def parse(
     depth_topic: Optional[str] = typer.Option(None, help="depth Image topic, registered to colour"),
     info_topic: Optional[str] = typer.Option(None, help="colour CameraInfo topic"),
     intrinsics: Optional[str] = typer.Option(None, help="fx,fy,cx,cy in pixels, for recordings without CameraInfo"),
+    camera_pose: Optional[str] = typer.Option(None, help="x,y,z,qx,qy,qz,qw of the colour optical frame in the table "
+                                              "frame (z = 0 on the table, z up) [/tf_static, else fitted to the depth]"),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help="leave out recordings that fail the check (listed in parse.json)"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),
     params_file: Optional[Path] = PARAMS_OPTION,
 ) -> None:
-    """Track every object in the recordings and write the 6D poses as a LeRobot v3.0 dataset."""
+    """Track every object in the recordings and write the 6D poses as a LeRobot v3.0 dataset.
+
+    RECORDINGS may be one rosbag2 directory, .mcap file or ROS 1 .bag, or a folder of them;
+    every one is read and checked before any is tracked."""
     from hsp.dataset.build import parse as parse_recordings
+    from hsp.perception.table import TableConfig
     from hsp.perception.tracker import TrackerConfig
     from hsp.recording.reader import ReadOptions
     from hsp.tasks.registry import load_task
@@ -145,12 +165,13 @@ def parse(
         t = load_task(task)
         rec_dir = recordings or Path("data/recordings") / task
         out_dir = out or Path("data/datasets") / task
-        options = ReadOptions(color_topic, depth_topic, info_topic, _intrinsics(intrinsics))
+        options = ReadOptions(color_topic, depth_topic, info_topic, _intrinsics(intrinsics), _pose(camera_pose))
         n_workers = workers if workers is not None else int(param(params, "parse.workers", 1))
         cfg = section(params, "tracker", TrackerConfig)
+        table = section(params, "parse.table", TableConfig)
         log.info("parse %s: read %s (poses from %s, %d workers)", task, rec_dir, poses_from, n_workers)
         report, tracking = parse_recordings(t, rec_dir, out_dir, poses_from, n_workers, options, cfg,
-                                            int(param(params, "seed", 0)))
+                                            int(param(params, "seed", 0)), table, skip_bad)
         if tracking is not None:
             from hsp.fileio import write_json
 

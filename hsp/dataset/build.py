@@ -12,7 +12,8 @@ import multiprocessing
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,9 +22,10 @@ from rich.progress import Progress
 from hsp.dataset.features import TrackStatus
 from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
-from hsp.parallel import one_omp_thread, pin_to_one_core
+from hsp.parallel import captured_warnings, one_omp_thread, pin_to_one_core
 from hsp.perception.episode import object_models, track_recording
 from hsp.perception.metrics import auc, episode_errors, match_identical
+from hsp.perception.table import TableConfig, table_frame
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
 from hsp.recording.reader import ReadOptions, find_recordings, read_recording
@@ -31,6 +33,8 @@ from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
 POSE_SOURCES = ("tracker", "ground-truth")
+RATE_TOLERANCE = 0.05
+"""A recording whose measured frame rate is further than this fraction from the dataset's is refused."""
 
 
 def _ground_truth_episodes(task: Task, recordings: list[Path], first: GroundTruth, fps: int) -> Iterator[EpisodePoses]:
@@ -51,6 +55,47 @@ class TrackJob:
     options: ReadOptions
     cfg: TrackerConfig
     seed: int
+    table: TableConfig = TableConfig()
+    T_world_cam: np.ndarray | None = None
+    """The table frame found by :func:`check_recording` (tracking jobs only)."""
+
+
+@dataclass
+class RecordingCheck:
+    """What :func:`check_recording` found in one recording: ``error`` if it cannot be parsed."""
+
+    path: Path
+    error: str = ""
+    frames: int = 0
+    fps: float = 0.0
+    """Measured from the colour frames' ``header.stamp`` (median period)."""
+    dropped: int = 0
+    """Frames missing between the stamps."""
+    T_world_cam: np.ndarray | None = None
+    table_frame: str = ""
+    """How the table frame was found: "given", "tf_static ROOT" or "fitted"."""
+    warnings: list[str] = field(default_factory=list)
+
+
+def frame_rate(stamps_ns: np.ndarray) -> tuple[float, int]:
+    """Frame rate (Hz) from the median period of ``stamps_ns``, and the frames missing between them."""
+    period = float(np.median(np.diff(stamps_ns)))
+    return 1e9 / period, int(np.sum(np.maximum(np.round(np.diff(stamps_ns) / period) - 1, 0)))
+
+
+def check_recording(job: TrackJob) -> RecordingCheck:
+    """Read one recording whole and find its table frame and frame rate, before any tracking."""
+    with captured_warnings() as warnings:
+        try:
+            rec = read_recording(job.path, job.options)
+            if len(rec.stamps_ns) < 2:
+                raise HspError(f"{job.path}: {len(rec.stamps_ns)} usable frame(s); an episode needs at least 2")
+            fps, dropped = frame_rate(rec.stamps_ns)
+            T, how = table_frame(rec.depth[0], rec.K, rec.T_world_cam, rec.tf_root, job.options.camera_pose, job.table,
+                                 job.seed, str(job.path))
+        except HspError as e:
+            return RecordingCheck(job.path, error=str(e), warnings=warnings)
+    return RecordingCheck(job.path, "", len(rec.stamps_ns), fps, dropped, T, how, warnings)
 
 
 @dataclass
@@ -71,9 +116,11 @@ def identical_groups(task: Task) -> list[list[int]]:
 
 
 def _track_one(job: TrackJob) -> TrackOutcome:
-    """Track one recording; then, separately, score it against its ground truth if any."""
+    """Track one recording from its checked table frame; then, separately, score it against
+    its ground truth if any."""
     task = load_task(job.task, job.pipeline_dir)
-    rec = read_recording(job.path, job.options)
+    with captured_warnings():  # the reader's, already reported by the check
+        rec = replace(read_recording(job.path, job.options), T_world_cam=job.T_world_cam)
     models = object_models(task, job.cfg, job.seed)
     tracked = track_recording(task, rec, models, job.cfg)
     frames = len(rec.rgb)
@@ -87,22 +134,42 @@ def _track_one(job: TrackJob) -> TrackOutcome:
     return TrackOutcome(EpisodePoses(str(job.path), tracked.poses, tracked.status), frames, tracked.seconds, errors)
 
 
-def _tracked_episodes(jobs: list[TrackJob], workers: int, outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
-    """Episodes in order, tracked in ``workers`` processes, each on a core of its own. One
-    worker is a process too: Open3D's parallel reductions round differently from run to run
-    on more than one thread, and the dataset must not depend on the run or on how many
-    processes made it."""
-    with Progress() as progress, one_omp_thread():
-        bar = progress.add_task(f"track {jobs[0].task}", total=len(jobs))
+@contextmanager
+def _pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """``workers`` processes, each on a core of its own. One worker is a process too: Open3D's
+    parallel reductions round differently from run to run on more than one thread, and the
+    dataset must not depend on the run or on how many processes made it."""
+    with one_omp_thread():
         ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=pin_to_one_core, initargs=(ctx.Value("i", 0),))
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=pin_to_one_core,
+                                   initargs=(ctx.Value("i", 0),))
         try:
-            for outcome in pool.map(_track_one, jobs):
-                outcomes.append(outcome)
-                progress.advance(bar)
-                yield outcome.episode
+            yield pool
         finally:
             pool.shutdown(cancel_futures=True)
+
+
+def check_recordings(task: Task, jobs: list[TrackJob], pool: ProcessPoolExecutor) -> list[RecordingCheck]:
+    """:func:`check_recording` of every job, in order, with progress; warnings logged once, with their level."""
+    checks = []
+    with Progress() as progress:
+        bar = progress.add_task(f"check {task.name}", total=len(jobs))
+        for check in pool.map(check_recording, jobs):
+            for w in check.warnings:
+                log.warning(w)
+            checks.append(check)
+            progress.advance(bar)
+    return checks
+
+
+def _tracked_episodes(jobs: list[TrackJob], pool: ProcessPoolExecutor, outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
+    """Episodes in order, tracked in the pool's processes."""
+    with Progress() as progress:
+        bar = progress.add_task(f"track {jobs[0].task}", total=len(jobs))
+        for outcome in pool.map(_track_one, jobs):
+            outcomes.append(outcome)
+            progress.advance(bar)
+            yield outcome.episode
 
 
 def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall_seconds: float) -> dict[str, float | int | str]:
@@ -139,31 +206,72 @@ def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall
     return report
 
 
+def dataset_rate(checks: list[RecordingCheck], tolerance: float) -> int:
+    """The dataset's frame rate: the most common whole rate among the recordings; those more
+    than ``tolerance`` (a fraction) off it are marked bad."""
+    rates = [round(c.fps) for c in checks]
+    fps = max(set(rates), key=lambda r: (rates.count(r), r))
+    for c in checks:
+        if abs(c.fps - fps) > tolerance * fps:
+            others = sum(1 for r in rates if r == fps)
+            c.error = (f"{c.path}: recorded at {c.fps:.2f} fps, {others} other recording(s) at {fps} fps; "
+                       "one dataset has one frame rate (record them alike, or parse them apart)")
+    return fps
+
+
 def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tracker", workers: int = 1,
           options: ReadOptions = ReadOptions(), cfg: TrackerConfig = TrackerConfig(),
-          seed: int = 0) -> tuple[dict[str, float | int | str], dict[str, float | int | str] | None]:
-    """Build the dataset of ``task`` from every recording in ``recordings_dir``; returns the
-    parse report and, for tracked poses, the tracking report."""
+          seed: int = 0, table: TableConfig = TableConfig(), skip_bad: bool = False,
+          ) -> tuple[dict[str, float | int | str | list[str]], dict[str, float | int | str] | None]:
+    """Build the dataset of ``task`` from every recording ``recordings_dir`` names; returns
+    the parse report and, for tracked poses, the tracking report. Every recording is read
+    and checked before any is tracked; a bad one is an error, or with ``skip_bad`` left out
+    and listed in the report."""
     if poses_from not in POSE_SOURCES:
         raise HspError(f"--poses-from {poses_from!r}: choose one of {', '.join(POSE_SOURCES)}")
     recordings = find_recordings(recordings_dir)
     start = time.perf_counter()
-    tracking = None
     if poses_from == "ground-truth":
         first = read_ground_truth(recordings[0])
         fps = int(first.metadata.get("fps", 0)) or int(round(1e9 / np.median(np.diff(first.stamps_ns))))
         counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
-    else:
-        object_models(task, cfg, seed)  # a missing mesh fails here, before any work
-        stamps = read_recording(recordings[0], options).stamps_ns
-        if len(stamps) < 2:
-            raise HspError(f"{recordings[0]}: {len(stamps)} usable frame(s); an episode needs at least 2")
-        fps = int(round(1e9 / np.median(np.diff(stamps))))
-        jobs = [TrackJob(task.name, task.objects_dir.parent, p, options, cfg, seed) for p in recordings]
+        seconds = time.perf_counter() - start
+        log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
+                 recordings_dir, out_dir, seconds)
+        return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds}, None
+
+    object_models(task, cfg, seed)  # a missing mesh fails here, before any work
+    jobs = [TrackJob(task.name, task.objects_dir.parent, p, options, cfg, seed, table) for p in recordings]
+    with _pool(workers) as pool:
+        checks = check_recordings(task, jobs, pool)
+        readable = [c for c in checks if not c.error]
+        fps = dataset_rate(readable, RATE_TOLERANCE) if readable else 0
+        bad = [c for c in checks if c.error]
+        if bad and (not skip_bad or len(bad) == len(checks)):
+            more = f" ({len(bad) - 1} more bad recording(s); --skip-bad parses the rest)" if len(bad) > 1 else ""
+            raise HspError(bad[0].error + more)
+        for c in bad:
+            log.warning("skipped: %s", c.error)
+        good = [c for c in checks if not c.error]
+        log.info("checked %d recordings: %d good at %d fps (%d frames dropped), %d skipped; table frames: %s",
+                 len(checks), len(good), fps, sum(c.dropped for c in good), len(bad), _tally(c.table_frame for c in good))
+        jobs = [replace(j, T_world_cam=c.T_world_cam) for j, c in zip(jobs, checks) if not c.error]
         outcomes: list[TrackOutcome] = []
-        counts = write_dataset(task, _tracked_episodes(jobs, workers, outcomes), out_dir, fps)
-        tracking = tracking_report(task, outcomes, workers, time.perf_counter() - start)
+        counts = write_dataset(task, _tracked_episodes(jobs, pool, outcomes), out_dir, fps)
+    tracking = tracking_report(task, outcomes, workers, time.perf_counter() - start)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)
-    return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds}, tracking
+    report = {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds,
+              "dropped_frames": sum(c.dropped for c in good), "warnings": sum(len(c.warnings) for c in checks),
+              "skipped": [c.error for c in bad]}
+    for how, n in _tally(c.table_frame.split()[0] for c in good).items():
+        report[f"table_frame.{how}"] = n
+    return report, tracking
+
+
+def _tally(values) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[v] = out.get(v, 0) + 1
+    return out

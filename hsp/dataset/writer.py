@@ -7,6 +7,7 @@ and then renamed into place; a failure leaves no dataset behind.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -47,40 +48,44 @@ def repo_id(task: Task) -> str:
     return f"hsp/{task.name}"
 
 
+def _add_episode(ds, task: Task, ep: EpisodePoses) -> int:
+    """Append one episode to LeRobot's writer ``ds``; its frame count."""
+    T, n = len(ep.poses), len(task.objects)
+    if ep.poses.shape != (T, n, 7) or ep.status.shape != (T, n):
+        raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} do not match {n} objects of {task.name!r}")
+    if T < 2:
+        raise HspError(f"{ep.source}: {T} frame(s); an episode needs at least 2")
+    if not np.all(np.isfinite(ep.poses[ep.status != TrackStatus.LOST])):
+        raise HspError(f"{ep.source}: NaN or infinite poses in frames not marked lost")
+    a = actions(ep.poses[:, 0], ep.status[:, 0]).astype(np.float32)
+    state = ep.poses[:, 0].astype(np.float32)
+    env = ep.poses[:, 1:].reshape(T, -1).astype(np.float32)
+    status = ep.status.astype(np.int64)
+    for t in range(T):
+        ds.add_frame({STATE: state[t], ENV_STATE: env[t], ACTION: a[t], STATUS: status[t], "task": task.name})
+    ds.save_episode()
+    return T
+
+
 def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, fps: int) -> dict[str, int]:
-    """Write all episodes to ``out_dir`` (replaced only on success); returns counts."""
+    """Write all episodes to ``out_dir`` (replaced only on success, nothing left otherwise); returns counts."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     out_dir = Path(out_dir).resolve()
-    n = len(task.objects)
     with atomic_path(out_dir) as tmp:
         ds = LeRobotDataset.create(repo_id(task), fps=fps, features=features(task), root=tmp, use_videos=False,
                                    robot_type="hsp")
-        frames, count = 0, 0
-        for ep in episodes:
-            T = len(ep.poses)
-            if ep.poses.shape != (T, n, 7) or ep.status.shape != (T, n):
-                raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} "
-                               f"do not match {n} objects of {task.name!r}")
-            if T < 2:
-                raise HspError(f"{ep.source}: {T} frame(s); an episode needs at least 2")
-            good = ep.status != TrackStatus.LOST
-            if not np.all(np.isfinite(ep.poses[good])):
-                raise HspError(f"{ep.source}: NaN or infinite poses in frames not marked lost")
-            a = actions(ep.poses[:, 0], ep.status[:, 0]).astype(np.float32)
-            state = ep.poses[:, 0].astype(np.float32)
-            env = ep.poses[:, 1:].reshape(T, -1).astype(np.float32)
-            status = ep.status.astype(np.int64)
-            for t in range(T):
-                ds.add_frame({STATE: state[t], ENV_STATE: env[t], ACTION: a[t], STATUS: status[t], "task": task.name})
-            ds.save_episode()
-            frames += T
-            count += 1
-        if count == 0:
-            raise HspError("no episodes to write")
+        try:
+            lengths = [_add_episode(ds, task, ep) for ep in episodes]
+            if not lengths:
+                raise HspError("no episodes to write")
+        except BaseException:
+            with contextlib.suppress(Exception):  # LeRobot flushes its episode metadata when collected, which
+                ds.finalize()                      # would re-create tmp/meta after the clean-up: flush it now
+            raise
         ds.finalize()
         check = LeRobotDataset(repo_id(task), root=tmp)
-        if len(check) != frames or check.num_episodes != count:
-            raise HspError(f"{tmp}: wrote {count} episodes / {frames} frames "
+        if len(check) != sum(lengths) or check.num_episodes != len(lengths):
+            raise HspError(f"{tmp}: wrote {len(lengths)} episodes / {sum(lengths)} frames "
                            f"but read back {check.num_episodes} / {len(check)}")
-    return {"episodes": count, "frames": frames}
+    return {"episodes": len(lengths), "frames": sum(lengths)}

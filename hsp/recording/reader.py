@@ -56,6 +56,9 @@ class ReadOptions:
     info_topic: str | None = None
     intrinsics: tuple[float, float, float, float] | None = None
     """(fx, fy, cx, cy) in pixels, when the recording has no CameraInfo."""
+    camera_pose: tuple[float, ...] | None = None
+    """(x, y, z, qx, qy, qz, qw): the colour camera's optical frame in the table frame (z = 0
+    on the table top, z up), overriding ``/tf_static`` and the fitted plane."""
 
 
 @dataclass
@@ -89,7 +92,10 @@ class Recording:
     """(3, 3) colour intrinsics."""
     frame_id: str
     T_world_cam: np.ndarray | None
-    """Camera pose from ``/tf_static`` (7,), when a chain to the image frame exists."""
+    """Camera pose from ``/tf_static`` (7,), when a chain to the image frame exists: in the
+    frame of its root, which may be the camera's own (see :mod:`hsp.perception.table`)."""
+    tf_root: str
+    """The root frame of that chain."""
     topics: dict[str, str]
     report: ReadReport
 
@@ -322,10 +328,11 @@ def _tf_pose(tf: object) -> np.ndarray:
     return np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w])
 
 
-def _camera_pose(static: dict[str, tuple[str, np.ndarray]], frame: str) -> np.ndarray | None:
-    """Compose ``/tf_static`` from its root down to ``frame``; None if ``frame`` is absent."""
+def _camera_pose(static: dict[str, tuple[str, np.ndarray]], frame: str) -> tuple[np.ndarray | None, str]:
+    """Compose ``/tf_static`` from its root down to ``frame``: the pose and the root's name;
+    ``(None, "")`` if ``frame`` is absent."""
     if frame not in static:
-        return None
+        return None, ""
     chain, node = [], frame
     while node in static and len(chain) < 32:
         parent, T = static[node]
@@ -334,7 +341,7 @@ def _camera_pose(static: dict[str, tuple[str, np.ndarray]], frame: str) -> np.nd
     pose = chain[-1]
     for T in reversed(chain[:-1]):
         pose = compose(pose, T)
-    return pose
+    return pose, node
 
 
 def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recording:
@@ -430,6 +437,7 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
         report.warn(f"{path}: colour messages are not in time order; sorted by header.stamp")
 
     depth_arr = np.stack([depth_frames[d] for _, d in pairs])
+    T_world_cam, tf_root = _camera_pose(static, frame_id)
     valid = depth_arr[depth_arr > 0]
     if valid.size and not 0.1 <= float(np.median(valid)) <= 10.0:
         report.warn(f"{path}: median depth {np.median(valid):.3f} m is outside 0.1–10 m; is the depth unit millimetres?")
@@ -440,7 +448,8 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
         stamps_ns=np.array([c for c, _ in pairs], dtype=np.int64),
         K=K,
         frame_id=frame_id,
-        T_world_cam=_camera_pose(static, frame_id),
+        T_world_cam=T_world_cam,
+        tf_root=tf_root,
         topics={"color": color, "depth": depth, "info": info or ""},
         report=report,
     )

@@ -8,15 +8,18 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from hsp.dataset.build import parse
+from hsp.dataset.features import TrackStatus
 from hsp.dataset.reader import load_episodes
 from hsp.errors import HspError
 from hsp.perception.tracker import TrackerConfig
+from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.messages import GROUND_TRUTH_PREFIX
-from hsp.recording.reader import ReadOptions
+from hsp.recording.reader import ReadOptions, read_recording
 from hsp.recording.record import RecordConfig, record
 from hsp.recording.writer import CameraRig
 from hsp.sim.camera import CameraConfig
 from hsp.sim.depth_noise import DepthNoiseConfig
+from tests.recording.fixtures import DRIVER_TF, write_rosbags_bag
 
 KEYS = {"translation_error_mm_median", "translation_error_mm_p95", "rotation_error_deg_median", "adds_auc",
         "lost_fraction", "frames_per_second"}
@@ -86,3 +89,28 @@ def test_an_object_lost_at_the_start_is_marked_lost_not_invented(tasks, camera_r
     out, _ = camera_recordings
     _, tracking = parse(tasks["stacking-1"], out, tmp_path / "ds", cfg=TrackerConfig(min_points=10**6))
     assert tracking["lost_fraction"] == 1.0
+
+
+def as_realsense_bag(recording, bag, storage="sqlite3"):
+    """An hsp recording re-written by ``rosbags`` as the RealSense driver and ``ros2 bag record``
+    write it: bgr8 colour, 16UC1 aligned depth, the driver's /tf_static (no table frame), no ground truth."""
+    rec = read_recording(recording)
+    write_rosbags_bag(bag, rgb=rec.rgb, depth_mm=np.round(rec.depth * 1000).astype(np.uint16), K=rec.K,
+                      encoding="bgr8", stamps_ns=rec.stamps_ns, storage=storage, tf=DRIVER_TF)
+
+
+def test_a_realsense_bag_parses_to_the_same_object_distances(tasks, camera_recordings, tmp_path):
+    """No table frame in the bag: it is fitted to the depth, and every object-to-object
+    distance comes out as in the recorded truth (p95 within 5 mm)."""
+    out, _ = camera_recordings
+    as_realsense_bag(out / "episode_000000.mcap", tmp_path / "bag")
+    report, _ = parse(tasks["stacking-1"], tmp_path / "bag", tmp_path / "ds")
+    assert report["table_frame.fitted"] == 1 and report["episodes"] == 1
+    (poses,), (status,), _ = load_episodes(tmp_path / "ds", "stacking-1")
+    truth = read_ground_truth(out / "episode_000000.mcap").poses
+    i, j = np.triu_indices(poses.shape[1], 1)
+    seen = (status[:, i] != TrackStatus.LOST) & (status[:, j] != TrackStatus.LOST)
+    d = np.linalg.norm(poses[:, i, :3] - poses[:, j, :3], axis=-1)
+    d_true = np.linalg.norm(truth[:, i, :3] - truth[:, j, :3], axis=-1)
+    err = np.abs(d - d_true)[seen]
+    assert seen.mean() > 0.95 and np.percentile(err, 95) < 0.005, (seen.mean(), np.percentile(err, [50, 95]))

@@ -54,7 +54,7 @@ DRIVER_TF = [("camera_link", "camera_color_frame", [0.0, 0.015, 0.0], [0.0, 0.0,
 
 def write_rosbags_bag(directory: Path, n: int = 6, prefix: str = "/camera/camera", *, storage: str = "mcap",
                       compression: str | None = None, split: bool = False, tf: list | None = None,
-                      rgb: np.ndarray | None = None, depth_mm: np.ndarray | None = None, cam: CameraConfig = CAM,
+                      rgb: np.ndarray | None = None, depth_mm: np.ndarray | None = None, K: np.ndarray = CAM.K,
                       encoding: str = "rgb8", period_ns: int = PERIOD, stamps_ns: np.ndarray | None = None,
                       ) -> tuple[np.ndarray, np.ndarray]:
     """A rosbag2 directory written by the ``rosbags`` package as ``ros2 bag record`` writes
@@ -102,8 +102,8 @@ def write_rosbags_bag(directory: Path, n: int = 6, prefix: str = "/camera/camera
                 padded[:, : w * 2] = depth_mm[t].astype(">u2").view(np.uint8).reshape(h, w * 2)
                 wr.write(c_dep, log_time + 1000, ts.serialize_cdr(Image(hdr, h, w, "16UC1", 1, w * 2 + 8, padded.reshape(-1)),
                                                                   Image.__msgtype__))
-                info = CameraInfo(hdr, h, w, "plumb_bob", np.zeros(5), cam.K.ravel(), np.eye(3).ravel(),
-                                  np.concatenate([cam.K, np.zeros((3, 1))], 1).ravel(), 0, 0, Roi(0, 0, 0, 0, False))
+                info = CameraInfo(hdr, h, w, "plumb_bob", np.zeros(5), K.ravel(), np.eye(3).ravel(),
+                                  np.concatenate([K, np.zeros((3, 1))], 1).ravel(), 0, 0, Roi(0, 0, 0, 0, False))
                 wr.write(c_inf, log_time, ts.serialize_cdr(info, CameraInfo.__msgtype__))
     if split:
         _merge_split(directory, directory.with_name(directory.name + "_1"))
