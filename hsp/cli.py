@@ -30,12 +30,15 @@ PARAMS_OPTION = typer.Option(None, "--params", help="params file (default: ./par
 
 @app.callback()
 def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="debug logging")) -> None:
+    """hsp's own log at INFO; the libraries' (LeRobot's codec choice for a dataset without
+    video, ...) only from WARNING, unless --verbose."""
     logging.basicConfig(
-        level=logging.DEBUG if verbose else logging.INFO,
+        level=logging.DEBUG if verbose else logging.WARNING,
         format="%(message)s",
         handlers=[RichHandler(console=err, show_path=False)],
         force=True,
     )
+    log.setLevel(logging.DEBUG if verbose else logging.INFO)
 
 
 def _fail(e: Exception) -> None:
@@ -52,7 +55,7 @@ def tasks(pipeline: Optional[Path] = typer.Option(None, help="pipeline directory
         table = Table("task", "objects (index 0 = end-effector)", "success")
         for name in list_tasks(pipeline):
             task = load_task(name, pipeline)
-            objs = ", ".join(f"{o.name} [{o.label}]" for o in task.objects)
+            objs = ", ".join(f"{o.name} ({o.label})" for o in task.objects)
             table.add_row(name, objs, task.spec.success.kind)
         Console().print(table)
     except HspError as e:

@@ -17,6 +17,7 @@ def test_tasks_lists_the_four_tasks_and_their_objects():
     assert result.exit_code == 0, result.output
     for name in TASKS + ["brush", "bucket", "canvas", "block_yellow", "wrench", "bolt_4"]:
         assert name in result.output
+    assert "hand (hand)" in result.output and "bolt_4 (bolt)" in result.output, result.output  # the labels
 
 
 def test_record_writes_recordings_and_report(tmp_path):

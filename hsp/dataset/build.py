@@ -74,6 +74,9 @@ class RecordingCheck:
     T_world_cam: np.ndarray | None = None
     table_frame: str = ""
     """How the table frame was found: "given", "tf_static ROOT" or "fitted"."""
+    skipped_chunks: int = 0
+    """Corrupt MCAP chunks and undecodable messages left out."""
+    truncated: bool = False
     warnings: list[str] = field(default_factory=list)
 
 
@@ -95,7 +98,8 @@ def check_recording(job: TrackJob) -> RecordingCheck:
                                  job.seed, str(job.path))
         except HspError as e:
             return RecordingCheck(job.path, error=str(e), warnings=warnings)
-    return RecordingCheck(job.path, "", len(rec.stamps_ns), fps, dropped, T, how, warnings)
+    return RecordingCheck(job.path, "", len(rec.stamps_ns), fps, dropped, T, how,
+                          rec.report.skipped_chunks + rec.report.skipped_messages, rec.report.truncated, warnings)
 
 
 @dataclass
@@ -263,7 +267,8 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)
     report = {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds,
-              "dropped_frames": sum(c.dropped for c in good), "warnings": sum(len(c.warnings) for c in checks),
+              "dropped_frames": sum(c.dropped for c in good), "skipped_chunks": sum(c.skipped_chunks for c in good),
+              "truncated_recordings": sum(c.truncated for c in good), "warnings": sum(len(c.warnings) for c in checks),
               "skipped": [c.error for c in bad]}
     for how, n in _tally(c.table_frame.split()[0] for c in good).items():
         report[f"table_frame.{how}"] = n

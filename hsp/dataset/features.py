@@ -4,7 +4,7 @@
 the world poses of the other objects flattened to 1-D (LeRobot's ACT and Diffusion Policy
 train on it without images, and ≥ 2-D features break LeRobot's dataset tools), ``action``
 the change a_t of e_t to the next frame (translation in the world frame + rotation vector),
-``observation.tracking_status`` one code per object. Object names, labels and symmetries
+``tracking_status`` one code per object. Object names, labels and symmetries
 ride along in the feature metadata.
 """
 
@@ -19,7 +19,8 @@ ACTION_NAMES = ["dx", "dy", "dz", "rx", "ry", "rz"]
 STATE = "observation.state"
 ENV_STATE = "observation.environment_state"
 ACTION = "action"
-STATUS = "observation.tracking_status"
+STATUS = "tracking_status"
+"""Not an ``observation.*`` key: LeRobot's policies take every one of those as an input."""
 
 
 class TrackStatus(IntEnum):

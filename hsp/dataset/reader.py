@@ -29,7 +29,8 @@ def load_episodes(dataset_dir: Path, task_name: str,
     ds = LeRobotDataset(f"hsp/{task_name}", root=dataset_dir)
     feats = ds.meta.features
     if ENV_STATE not in feats or STATUS not in feats:
-        raise HspError(f"{dataset_dir}: not an hsp pose dataset (features: {sorted(feats)})")
+        raise HspError(f"{dataset_dir}: not a pose dataset of this hsp version (features: {sorted(feats)}; "
+                       "re-run `hsp parse`)")
     names = [feats[STATE].get("object")] + list(feats[ENV_STATE].get("objects", []))
     if objects is not None and names != objects:
         raise HspError(f"{dataset_dir}: dataset objects {names} are not those of task {task_name!r} {objects}")

@@ -1,0 +1,100 @@
+"""``hsp parse`` on bad input: every recording is checked before any is tracked; a bad one is
+one line naming the file and leaves nothing behind, or with --skip-bad is left out and listed."""
+
+import json
+import shutil
+
+import pytest
+from typer.testing import CliRunner
+
+from hsp.cli import app
+from hsp.recording.record import RecordConfig, record
+from hsp.recording.writer import CameraRig
+from hsp.sim.camera import CameraConfig
+from hsp.sim.depth_noise import DepthNoiseConfig
+from tests.recording.fixtures import write_bag
+
+runner = CliRunner()
+RIG = CameraRig(CameraConfig().scaled(160, 120), DepthNoiseConfig())
+
+
+@pytest.fixture(scope="module")
+def good(tasks, tmp_path_factory):
+    """Two small stacking-1 recordings at 5 fps, and one at 10 fps."""
+    root = tmp_path_factory.mktemp("inputs")
+    record(tasks["stacking-1"], RecordConfig(episodes=2, seed=3, fps=5, workers=1, rig=RIG), root / "five")
+    record(tasks["stacking-1"], RecordConfig(episodes=1, seed=4, fps=10, workers=1, rig=RIG), root / "ten")
+    return root
+
+
+def folder(good, tmp_path, bad_name=None, bad_bytes=None):
+    d = tmp_path / "recordings"
+    shutil.copytree(good / "five", d)
+    if bad_name:
+        (d / bad_name).write_bytes(bad_bytes)
+    return d
+
+
+def parse(recordings, tmp_path, *extra):
+    return runner.invoke(app, ["parse", "stacking-1", "--recordings", str(recordings), "--out", str(tmp_path / "ds"),
+                               "--reports", str(tmp_path / "reports"), "--workers", "1", *extra], terminal_width=400)
+
+
+def assert_failed_cleanly(result, tmp_path, message):
+    assert result.exit_code == 1, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and message in errors[0], result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "ds").exists() and not list(tmp_path.glob(".ds*"))  # no dataset, no hidden partial one
+
+
+def damaged(good, how):
+    data = bytearray((good / "five" / "episode_000001.mcap").read_bytes())
+    if how == "flip":
+        data[len(data) // 2] ^= 0xFF
+        return bytes(data)
+    return bytes(data[: len(data) * 6 // 10])
+
+
+@pytest.mark.parametrize(("name", "content", "message"), [
+    ("picture.mcap", b"\x89PNG\r\n\x1a\n" + b"\x00" * 64, "picture.mcap: not MCAP but a PNG image"),
+    ("empty.mcap", b"", "empty.mcap: empty file"),
+])
+def test_a_bad_file_among_good_ones(good, tmp_path, name, content, message):
+    d = folder(good, tmp_path, name, content)
+    assert_failed_cleanly(parse(d, tmp_path), tmp_path, message)
+    result = parse(d, tmp_path, "--skip-bad")
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "reports" / "stacking-1" / "parse.json").read_text())
+    assert report["episodes"] == 2 and len(report["skipped"]) == 1 and message in report["skipped"][0]
+
+
+def test_mismatched_resolutions(good, tmp_path):
+    d = folder(good, tmp_path)
+    write_bag(d / "small_depth.mcap", depth_shape=(12, 16))
+    assert_failed_cleanly(parse(d, tmp_path), tmp_path, "small_depth.mcap: depth 16x12 differs from colour 32x24")
+
+
+def test_mixed_frame_rates(good, tmp_path):
+    d = folder(good, tmp_path)
+    shutil.copy(good / "ten" / "episode_000000.mcap", d / "episode_fast.mcap")
+    assert_failed_cleanly(parse(d, tmp_path), tmp_path, "episode_fast.mcap: recorded at 10.00 fps, 2 other recording(s) at 5 fps")
+
+
+def test_empty_directory(tmp_path):
+    (tmp_path / "none").mkdir()
+    assert_failed_cleanly(parse(tmp_path / "none", tmp_path), tmp_path, "none: no recordings")
+
+
+@pytest.mark.parametrize("how", ["flip", "cut"])
+def test_damaged_recording_keeps_what_survives(good, tmp_path, how):
+    """A corrupt chunk is skipped and a truncated file keeps its frames before the break:
+    warned (with its level, naming the file) and counted."""
+    d = folder(good, tmp_path)
+    (d / "episode_000001.mcap").write_bytes(damaged(good, how))
+    result = parse(d, tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "WARNING" in result.output and "episode_000001.mcap" in result.output
+    report = json.loads((tmp_path / "reports" / "stacking-1" / "parse.json").read_text())
+    assert report["episodes"] == 2 and report["warnings"] >= 1
+    assert report["skipped_chunks"] == (1 if how == "flip" else 0) and report["truncated_recordings"] == (how == "cut")
