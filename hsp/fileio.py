@@ -18,6 +18,7 @@ def atomic_path(path: Path) -> Iterator[Path]:
     (a directory made there replaces the previous one whole, see :func:`replace_dir`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_orphans(path)
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
         yield tmp
@@ -30,6 +31,18 @@ def atomic_path(path: Path) -> Iterator[Path]:
             shutil.rmtree(tmp, ignore_errors=True)
         elif tmp.exists():
             tmp.unlink()
+
+
+def _remove_orphans(path: Path) -> None:
+    """Remove ``path``'s temporary siblings left by a process that no longer runs (killed with -9)."""
+    for orphan in path.parent.glob(f".{path.name}.partial-*"):
+        pid = orphan.name.rsplit("-", 1)[1]
+        if not pid.isdigit() or Path(f"/proc/{pid}").exists():
+            continue
+        if orphan.is_dir():
+            shutil.rmtree(orphan, ignore_errors=True)
+        else:
+            orphan.unlink(missing_ok=True)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

@@ -23,3 +23,17 @@ def test_a_failed_block_keeps_the_previous_artifact(tmp_path):
         tmp.write_text("half")
         raise RuntimeError("interrupted")
     assert out.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["labels.json"]
+
+
+def test_what_a_killed_run_left_is_removed_by_the_next(tmp_path):
+    """A run killed with -9 cannot clean up its temporary copy; the next run of the stage does,
+    and leaves a running process's copy alone."""
+    import subprocess
+
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    (tmp_path / f".ds.partial-{dead.pid}" / "meta").mkdir(parents=True)
+    (tmp_path / ".ds.partial-1").mkdir()  # pid 1 runs
+    with atomic_path(tmp_path / "ds") as tmp:
+        tmp.mkdir()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".ds.partial-1", "ds"]

@@ -212,13 +212,18 @@ def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall
 
 def dataset_rate(checks: list[RecordingCheck], tolerance: float) -> int:
     """The dataset's frame rate: the most common whole rate among the recordings; those more
-    than ``tolerance`` (a fraction) off it are marked bad."""
+    than ``tolerance`` (a fraction) off it are marked bad. LeRobot stores a whole number of
+    frames per second, so a rate that is not one (7.5 fps) is refused for all."""
     rates = [round(c.fps) for c in checks]
     fps = max(set(rates), key=lambda r: (rates.count(r), r))
+    near = [c for c in checks if abs(c.fps - fps) <= tolerance * fps]
+    if not near:
+        c = next(c for c in checks if round(c.fps) == fps)
+        raise HspError(f"{c.path}: recorded at {c.fps:.2f} fps; a LeRobot dataset needs a whole number of frames "
+                       "per second (record at 6, 15, 30 or 60 fps)")
     for c in checks:
-        if abs(c.fps - fps) > tolerance * fps:
-            others = sum(1 for r in rates if r == fps)
-            c.error = (f"{c.path}: recorded at {c.fps:.2f} fps, {others} other recording(s) at {fps} fps; "
+        if c not in near:
+            c.error = (f"{c.path}: recorded at {c.fps:.2f} fps, {len(near)} other recording(s) at {fps} fps; "
                        "one dataset has one frame rate (record them alike, or parse them apart)")
     return fps
 

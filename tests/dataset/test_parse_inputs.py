@@ -2,12 +2,21 @@
 one line naming the file and leaves nothing behind, or with --skip-bad is left out and listed."""
 
 import json
+import os
 import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 from hsp.cli import app
+from hsp.dataset.build import RecordingCheck, dataset_rate
+from hsp.dataset.reader import load_episodes
+from hsp.errors import HspError
 from hsp.recording.record import RecordConfig, record
 from hsp.recording.writer import CameraRig
 from hsp.sim.camera import CameraConfig
@@ -98,3 +107,30 @@ def test_damaged_recording_keeps_what_survives(good, tmp_path, how):
     report = json.loads((tmp_path / "reports" / "stacking-1" / "parse.json").read_text())
     assert report["episodes"] == 2 and report["warnings"] >= 1
     assert report["skipped_chunks"] == (1 if how == "flip" else 0) and report["truncated_recordings"] == (how == "cut")
+
+
+def test_a_parse_killed_midway_leaves_the_previous_dataset(good, tmp_path):
+    d = folder(good, tmp_path)
+    assert parse(d, tmp_path).exit_code == 0
+    before = (tmp_path / "ds" / "meta" / "info.json").read_text()
+    args = [sys.executable, "-c", "from hsp.cli import app; app()", "parse", "stacking-1", "--recordings", str(d),
+            "--out", str(tmp_path / "ds"), "--reports", str(tmp_path / "reports"), "--workers", "1"]
+    proc = subprocess.Popen(args, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob(".ds.partial-*")) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert list(tmp_path.glob(".ds.partial-*")), "the parse never started writing"
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert (tmp_path / "ds" / "meta" / "info.json").read_text() == before
+    assert load_episodes(tmp_path / "ds", "stacking-1")[2]["fps"] == 5
+    assert parse(d, tmp_path).exit_code == 0 and not list(tmp_path.glob(".ds*"))  # the next run clears what was left
+
+
+def test_the_dataset_rate_is_the_common_whole_one():
+    checks = [RecordingCheck(Path(f"e{k}.mcap"), fps=f) for k, f in enumerate([15.02, 14.97, 7.5, 15.0])]
+    assert dataset_rate(checks, 0.05) == 15
+    assert [bool(c.error) for c in checks] == [False, False, True, False]
+    assert "e2.mcap: recorded at 7.50 fps, 3 other recording(s) at 15 fps" in checks[2].error
+    with pytest.raises(HspError, match="e0.mcap: recorded at 7.50 fps; a LeRobot dataset needs a whole number"):
+        dataset_rate([RecordingCheck(Path("e0.mcap"), fps=7.5)], 0.05)
