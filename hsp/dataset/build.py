@@ -57,7 +57,9 @@ class TrackJob:
     seed: int
     table: TableConfig = TableConfig()
     T_world_cam: np.ndarray | None = None
-    """The table frame found by :func:`check_recording` (tracking jobs only)."""
+    """The table frame found by :func:`check_recording` (tracking jobs only) ..."""
+    table_frame: str = ""
+    """... and how: a fitted frame is not the recorded truth's world, so it is not scored against it."""
 
 
 @dataclass
@@ -130,7 +132,7 @@ def _track_one(job: TrackJob) -> TrackOutcome:
     frames = len(rec.rgb)
     del rec
     errors = None
-    gt = matching_ground_truth(job.path, task.names, frames)
+    gt = matching_ground_truth(job.path, task.names, frames) if job.table_frame != "fitted" else None
     if gt is not None:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
         order = match_identical(identical_groups(task), tracked.poses, gt.poses)
@@ -166,7 +168,8 @@ def check_recordings(task: Task, jobs: list[TrackJob], pool: ProcessPoolExecutor
     return checks
 
 
-def _tracked_episodes(jobs: list[TrackJob], pool: ProcessPoolExecutor, outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
+def _tracked_episodes(jobs: list[TrackJob], pool: ProcessPoolExecutor,
+                      outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
     """Episodes in order, tracked in the pool's processes."""
     with Progress() as progress:
         bar = progress.add_task(f"track {jobs[0].task}", total=len(jobs))
@@ -263,8 +266,10 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
             log.warning("skipped: %s", c.error)
         good = [c for c in checks if not c.error]
         log.info("checked %d recordings: %d good at %d fps (%d frames dropped), %d skipped; table frames: %s",
-                 len(checks), len(good), fps, sum(c.dropped for c in good), len(bad), _tally(c.table_frame for c in good))
-        jobs = [replace(j, T_world_cam=c.T_world_cam) for j, c in zip(jobs, checks) if not c.error]
+                 len(checks), len(good), fps, sum(c.dropped for c in good), len(bad),
+                 _tally(c.table_frame for c in good))
+        jobs = [replace(j, T_world_cam=c.T_world_cam, table_frame=c.table_frame)
+                for j, c in zip(jobs, checks) if not c.error]
         outcomes: list[TrackOutcome] = []
         counts = write_dataset(task, _tracked_episodes(jobs, pool, outcomes), out_dir, fps)
     tracking = tracking_report(task, outcomes, workers, time.perf_counter() - start)

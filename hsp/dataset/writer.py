@@ -52,7 +52,8 @@ def _add_episode(ds, task: Task, ep: EpisodePoses) -> int:
     """Append one episode to LeRobot's writer ``ds``; its frame count."""
     T, n = len(ep.poses), len(task.objects)
     if ep.poses.shape != (T, n, 7) or ep.status.shape != (T, n):
-        raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} do not match {n} objects of {task.name!r}")
+        raise HspError(f"{ep.source}: poses {ep.poses.shape} / status {ep.status.shape} "
+                       f"do not match {n} objects of {task.name!r}")
     if T < 2:
         raise HspError(f"{ep.source}: {T} frame(s); an episode needs at least 2")
     if not np.all(np.isfinite(ep.poses[ep.status != TrackStatus.LOST])):

@@ -119,7 +119,8 @@ def find_recordings(path: Path) -> list[Path]:
         raise HspError(f"{path}: a rosbag2 directory without metadata.yaml (a recording that was cut short?); "
                        "restore it with `ros2 bag reindex DIR`")
     names = ", ".join(sorted(p.name for p in path.iterdir())[:8]) or "nothing"
-    raise HspError(f"{path}: no recordings (.mcap or .bag files, rosbag2 directories with metadata.yaml); found: {names}")
+    raise HspError(f"{path}: no recordings (.mcap or .bag files, rosbag2 directories with metadata.yaml); "
+                   f"found: {names}")
 
 
 def _magic(path: Path) -> bytes:
@@ -232,7 +233,8 @@ def _read_rosbags(path: Path, report: ReadReport) -> _Messages:
         raise HspError(f"{path}: cannot read the bag ({_first_line(e)})") from None
     try:
         out.types = {c.topic: c.msgtype for c in reader.connections}
-        wanted = [c for c in reader.connections if c.msgtype in READ_TYPES and not c.topic.startswith(GROUND_TRUTH_PREFIX)]
+        wanted = [c for c in reader.connections
+                  if c.msgtype in READ_TYPES and not c.topic.startswith(GROUND_TRUTH_PREFIX)]
         try:
             for c, t, raw in reader.messages(connections=wanted):
                 out.messages.append((c.topic, t, reader.deserialize(raw, c.msgtype)))
@@ -388,7 +390,8 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
                     raise HspError(f"{path}: depth topic {depth} carries {msg.encoding!r}")  # type: ignore[attr-defined]
                 depth_frames[stamp] = img
         elif topic == info and K is None:
-            K = np.asarray(msg.k if hasattr(msg, "k") else msg.K, float).reshape(3, 3)  # type: ignore[attr-defined]  # ROS 1: K
+            k = msg.k if hasattr(msg, "k") else msg.K  # type: ignore[attr-defined]  # ROS 1 spells it K
+            K = np.asarray(k, float).reshape(3, 3)
             info_size = (msg.height, msg.width)  # type: ignore[attr-defined]
         elif topic == "/tf_static" and bag.types[topic] == TF_SCHEMA:
             for tf in msg.transforms:  # type: ignore[attr-defined]
