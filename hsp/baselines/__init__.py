@@ -20,18 +20,12 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-METHODS = ("bc", "bc-rnn", "taco", "gail", "act")
-"""Baselines built so far."""
-PLANNED = ("diffusion",)
-"""Baselines of issue 20 not offered yet (``lerobot_policies`` trains and runs it, but no
-toy test shows it learning yet): asking for one is a clear error."""
+METHODS = ("bc", "bc-rnn", "taco", "gail", "act", "diffusion")
 
 
 def check_method(method: str, others: tuple[str, ...] = ()) -> None:
-    """A one-line error for a baseline not built yet or a name that is none (``others``:
-    the caller's own methods, listed in the message)."""
-    if method in PLANNED:
-        raise HspError(f"baseline {method!r} is not built yet (issue 20); built: {', '.join(METHODS)}")
+    """A one-line error for a name that is no method (``others``: the caller's own methods,
+    listed in the message)."""
     if method not in METHODS:
         raise HspError(f"unknown method {method!r}; valid methods: {', '.join((*others, *METHODS))}")
 

@@ -1,4 +1,4 @@
-"""``hsp train|eval --method bc|bc-rnn|taco|act`` end to end on a tiny dataset, and the refusals."""
+"""``hsp train|eval --method bc|bc-rnn|taco|act|diffusion`` end to end on a tiny dataset, and the refusals."""
 
 import json
 
@@ -23,7 +23,8 @@ def dataset(tmp_path_factory):
 
 
 TINY = {"bc": "hidden: 16", "bc-rnn": "hidden: 16", "taco": "hidden: 16",
-        "act": "policy: {dim_model: 16, dim_feedforward: 16, n_heads: 2, latent_dim: 4, chunk_size: 4, n_action_steps: 4}"}
+        "act": "policy: {dim_model: 16, dim_feedforward: 16, n_heads: 2, latent_dim: 4, chunk_size: 4, n_action_steps: 4}",
+        "diffusion": "policy: {down_dims: [8, 16], horizon: 4, n_action_steps: 2, num_train_timesteps: 10, num_inference_steps: 2}"}
 
 
 @pytest.mark.parametrize("method", TINY)
@@ -37,7 +38,7 @@ def test_train_then_eval_closed_loop(dataset, tmp_path, method):
     assert result.exit_code == 0, result.output
     report = json.loads((reports / "stacking-1" / method / "train.json").read_text())
     assert report["method"] == method and report["config"]["iterations"] == 20 and report["episodes"] == 2
-    saved = json.loads((model / ("hsp.json" if method == "act" else "config.json")).read_text())["train"]
+    saved = json.loads((model / ("hsp.json" if method in ("act", "diffusion") else "config.json")).read_text())["train"]
     assert saved == report["config"]
     out = tmp_path / "r"
     result = runner.invoke(app, ["eval", "stacking-1", "--method", method, "--model", str(model), "--episodes", "2",
@@ -69,7 +70,6 @@ def test_bad_input_is_one_line(dataset, tmp_path):
         (["eval", "stacking-1", "--method", "bc", "--model", str(tmp_path / "none")], "model directory not found"),
         (["eval", "stacking-1", "--method", "bc", "--model", str(dataset)], "not a trained bc model"),
         (["eval", "stacking-1", "--method", "act", "--model", str(model)], "not a trained act model"),
-        (["train", "stacking-1", "--method", "diffusion", "--dataset", str(dataset)], "baseline 'diffusion' is not built yet"),
     ]
     for args, message in cases:
         result = runner.invoke(app, [*args, "--out", str(tmp_path / "out")], terminal_width=300)

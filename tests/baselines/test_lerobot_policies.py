@@ -13,28 +13,31 @@ SMALL = {
     "act": {"dim_model": 64, "dim_feedforward": 128, "n_heads": 4, "n_encoder_layers": 1, "n_decoder_layers": 1,
             "n_vae_encoder_layers": 1, "latent_dim": 8, "chunk_size": 5, "n_action_steps": 5, "optimizer_lr": 1e-3, "dropout": 0.0},
     "diffusion": {"down_dims": [16, 32, 64], "n_obs_steps": 2, "horizon": 8, "n_action_steps": 4,
-                  "noise_scheduler_type": "DDIM", "num_train_timesteps": 50, "num_inference_steps": 10,
-                  "scheduler_warmup_steps": 10, "optimizer_lr": 1e-3, "diffusion_step_embed_dim": 32},
+                  "noise_scheduler_type": "DDIM", "num_train_timesteps": 100, "num_inference_steps": 50,
+                  "scheduler_warmup_steps": 10, "optimizer_lr": 1e-3, "diffusion_step_embed_dim": 32,
+                  "do_mask_loss_for_padding": True},
 }
 
 
-TOY = {"act": dict(iterations=1000, batch_size=64)}
-"""Budgets of the toy test, for the LeRobot policies offered (Diffusion has not learnt it yet)."""
+TOY = {"act": (dict(iterations=1000, batch_size=64), 0.8), "diffusion": (dict(iterations=4000, batch_size=128), 0.5)}
+"""Budget of the toy test and the success it must reach (measured: ACT 1.0 of 10 layouts in about
+40 s; Diffusion 0.7 in about 3 minutes, 0.9 after 8,000 iterations: docs/baselines.md)."""
 
 
 @pytest.mark.parametrize("method", TOY)
 def test_learns_a_toy_reach_that_an_untrained_policy_fails(tasks, method):
     task = tasks["stacking-1"]
     demos = toy_demonstrations(task, 100, seed=0)
+    budget, success = TOY[method]
     model, report = lp.train(demos, task.names, method, lp.LeRobotPolicyConfig(
-        **TOY[method], policy=SMALL[method], checkpoint_every=250), seed=0)
+        **budget, policy=SMALL[method], checkpoint_every=250), seed=0)
     untrained, _ = lp.train(demos, task.names, method, lp.LeRobotPolicyConfig(
         iterations=1, policy=SMALL[method], validation_every=0), seed=0)
     held = demos.subset(list(range(4, 100, 5)))
     assert report["validation_episodes"] == 20
     assert report["validation_loss"] < 0.5 * lp.held_out_loss(untrained, held, seed=0)
     assert toy_success_rate(lp.LeRobotAgent(untrained, task), task) == 0.0
-    assert toy_success_rate(lp.LeRobotAgent(model, task), task) >= 0.8
+    assert toy_success_rate(lp.LeRobotAgent(model, task), task) >= success
 
 
 def test_batch_clamps_to_the_episode_and_pads_what_lies_beyond_or_was_not_observed(tasks):
