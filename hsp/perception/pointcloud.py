@@ -7,14 +7,20 @@ import numpy as np
 from hsp.geometry import inverse, pose_to_matrix, transform_points
 
 
-def backproject(depth: np.ndarray, rgb: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, stride: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Valid pixels of ``depth (H, W)`` m, every ``stride``-th row and column, as world
-    points ``(N, 3)`` and their colours ``(N, 3)`` in [0, 1]."""
+def camera_points(depth: np.ndarray, K: np.ndarray, stride: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Valid pixels of ``depth (H, W)`` m, every ``stride``-th row and column, as camera-frame
+    points ``(N, 3)``, with their rows and columns ``(N,)``."""
     d = depth[::stride, ::stride]
     v, u = np.nonzero(d > 0)
     z = d[v, u].astype(np.float64)
     u, v = u * stride, v * stride
-    pc = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1)
+    return np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1), v, u
+
+
+def backproject(depth: np.ndarray, rgb: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, stride: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Valid pixels of ``depth (H, W)`` m, every ``stride``-th row and column, as world
+    points ``(N, 3)`` and their colours ``(N, 3)`` in [0, 1]."""
+    pc, v, u = camera_points(depth, K, stride)
     M = pose_to_matrix(T_world_cam)
     return pc @ M[:3, :3].T + M[:3, 3], rgb[v, u].astype(np.float64) / 255.0
 

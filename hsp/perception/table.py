@@ -21,6 +21,7 @@ import numpy as np
 
 from hsp.errors import HspError
 from hsp.geometry import inverse, pose_from_matrix, pose_to_matrix
+from hsp.perception.pointcloud import camera_points
 
 
 @dataclass(frozen=True)
@@ -49,20 +50,12 @@ class TablePlane:
     """Share of the depth readings on the plane."""
 
 
-def camera_points(depth: np.ndarray, K: np.ndarray, stride: int) -> np.ndarray:
-    """Valid depth pixels as camera-frame points ``(N, 3)``."""
-    d = depth[::stride, ::stride]
-    v, u = np.nonzero(d > 0)
-    z = d[v, u].astype(np.float64)
-    return np.stack([(u * stride - K[0, 2]) / K[0, 0] * z, (v * stride - K[1, 2]) / K[1, 1] * z, z], axis=1)
-
-
 def fit_table(depth: np.ndarray, K: np.ndarray, cfg: TableConfig = TableConfig(), seed: int = 0,
               source: str = "depth") -> TablePlane:
     """The dominant plane of ``depth (H, W)`` m; a one-line error naming ``source`` if there is none."""
     import open3d as o3d
 
-    pts = camera_points(depth, K, cfg.stride)
+    pts = camera_points(depth, K, cfg.stride)[0]
     if len(pts) < 100:
         raise HspError(f"{source}: {len(pts)} depth readings in the first frame; too few to find the table")
     o3d.utility.random.seed(seed)
