@@ -110,8 +110,8 @@ def test_parse_ground_truth_ablation(tmp_path, monkeypatch):
     assert (lab.tool == gt.tool).all() and (lab.target == gt.target).all()
     ends = np.flatnonzero(np.diff(gt.waypoint_index))
     assert set(lab.waypoint_index) == set(ends) | {len(gt.tool) - 1}
-    baseline = runner.invoke(app, ["train", "painting", "--method", "diffusion", "--dataset", str(ds)])
-    assert baseline.exit_code == 1 and "baseline 'diffusion' is not built yet" in baseline.output
+    baseline = runner.invoke(app, ["train", "painting", "--method", "dagger", "--dataset", str(ds)])
+    assert baseline.exit_code == 1 and "unknown method 'dagger'" in baseline.output
 
 
 @pytest.mark.parametrize("stage", ["report"])

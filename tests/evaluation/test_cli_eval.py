@@ -43,7 +43,6 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, tasks):
     save(untrained_policy(tasks["painting"]), TrainConfig(iterations=1), tmp_path / "painting")
     out = tmp_path / "r"
     cases = [
-        (["eval", "stacking-1", "--method", "diffusion"], "baseline 'diffusion' is not built yet"),
         (["eval", "stacking-1", "--method", "dagger"], "unknown method 'dagger'"),
         (["eval", "stacking-1", "--method", "oracle", "--observer", "eyes"], "unknown observer 'eyes'"),
         (["eval", "stacking-1", "--model", str(tmp_path / "none")], "model directory not found"),
