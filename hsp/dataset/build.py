@@ -100,6 +100,9 @@ def check_recording(job: TrackJob) -> RecordingCheck:
                                  job.seed, str(job.path))
         except HspError as e:
             return RecordingCheck(job.path, error=str(e), warnings=warnings)
+        except Exception as e:  # noqa: BLE001 - whatever else a damaged file raises is a fault of that file
+            error = f"{job.path}: cannot be read ({type(e).__name__}: {e})".splitlines()[0]
+            return RecordingCheck(job.path, error=error, warnings=warnings)
     return RecordingCheck(job.path, "", len(rec.stamps_ns), fps, dropped, T, how,
                           rec.report.skipped_chunks + rec.report.skipped_messages, rec.report.truncated, warnings)
 

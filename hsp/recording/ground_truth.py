@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -58,7 +59,7 @@ def read_ground_truth(path: Path) -> GroundTruth:
                         "tool": msg.tool, "target": msg.target, "waypoint_index": msg.waypoint_index,
                         "waypoint": [p.x, p.y, p.z, q.x, q.y, q.z, q.w], "grasped": msg.grasped,
                     }
-    except (McapError, OSError, ValueError) as e:
+    except (McapError, OSError, ValueError, zstandard.ZstdError, RuntimeError) as e:  # lz4: RuntimeError
         raise HspError(f"{path}: cannot read ground truth: {e}") from None
     if not poses:
         raise HspError(f"{path}: no messages on {GROUND_TRUTH_POSES}")

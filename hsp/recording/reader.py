@@ -18,6 +18,7 @@ Ground-truth topics (``/hsp/ground_truth/*``) are never read here.
 from __future__ import annotations
 
 import logging
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -210,7 +211,7 @@ def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_mes
             try:
                 data = unzip.decompress(m.data) if compressed_messages else m.data
                 out.messages.append((ch.topic, m.log_time, decoders[key](data)))
-            except (zstandard.ZstdError, ValueError, IndexError, EOFError) as e:
+            except (zstandard.ZstdError, ValueError, IndexError, EOFError, struct.error) as e:
                 bad += 1
                 if bad == 1:
                     report.warn(f"{f}: skipped a message of {ch.topic} that does not decode ({type(e).__name__})")
