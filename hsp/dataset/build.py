@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import time
+from collections import Counter
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -246,21 +247,30 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
         raise HspError(f"--poses-from {poses_from!r}: choose one of {', '.join(POSE_SOURCES)}")
     recordings = find_recordings(recordings_dir)
     start = time.perf_counter()
+    tracking, extra = None, {}
     if poses_from == "ground-truth":
         first = read_ground_truth(recordings[0])
-        fps = int(first.metadata.get("fps", 0)) or int(round(1e9 / np.median(np.diff(first.stamps_ns))))
+        fps = int(first.metadata.get("fps", 0)) or round(frame_rate(first.stamps_ns)[0])
         counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
-        seconds = time.perf_counter() - start
-        log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
-                 recordings_dir, out_dir, seconds)
-        return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds}, None
+    else:
+        counts, fps, extra, tracking = _parse_tracked(task, recordings, out_dir, workers, options, cfg, seed, table,
+                                                      skip_bad, start)
+    seconds = time.perf_counter() - start
+    log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
+             recordings_dir, out_dir, seconds)
+    return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds, **extra}, tracking
 
+
+def _parse_tracked(task: Task, recordings: list[Path], out_dir: Path, workers: int, options: ReadOptions,
+                   cfg: TrackerConfig, seed: int, table: TableConfig, skip_bad: bool, start: float):
+    """Check every recording, then track the good ones into the dataset: counts, frame rate,
+    the check's part of the parse report and the tracking report."""
     object_models(task, cfg, seed)  # a missing mesh fails here, before any work
     jobs = [TrackJob(task.name, task.objects_dir.parent, p, options, cfg, seed, table) for p in recordings]
     with _pool(workers) as pool:
         checks = check_recordings(task, jobs, pool)
         readable = [c for c in checks if not c.error]
-        fps = dataset_rate(readable, RATE_TOLERANCE) if readable else 0
+        fps = dataset_rate(readable, RATE_TOLERANCE) if readable else 0  # marks recordings at another rate bad
         bad = [c for c in checks if c.error]
         if bad and (not skip_bad or len(bad) == len(checks)):
             more = f" ({len(bad) - 1} more bad recording(s); --skip-bad parses the rest)" if len(bad) > 1 else ""
@@ -270,26 +280,14 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
         good = [c for c in checks if not c.error]
         log.info("checked %d recordings: %d good at %d fps (%d frames dropped), %d skipped; table frames: %s",
                  len(checks), len(good), fps, sum(c.dropped for c in good), len(bad),
-                 _tally(c.table_frame for c in good))
+                 dict(Counter(c.table_frame for c in good)))
         jobs = [replace(j, T_world_cam=c.T_world_cam, table_frame=c.table_frame)
                 for j, c in zip(jobs, checks) if not c.error]
         outcomes: list[TrackOutcome] = []
         counts = write_dataset(task, _tracked_episodes(jobs, pool, outcomes), out_dir, fps)
     tracking = tracking_report(task, outcomes, workers, time.perf_counter() - start)
-    seconds = time.perf_counter() - start
-    log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
-             recordings_dir, out_dir, seconds)
-    report = {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds,
-              "dropped_frames": sum(c.dropped for c in good), "skipped_chunks": sum(c.skipped_chunks for c in good),
-              "truncated_recordings": sum(c.truncated for c in good), "warnings": sum(len(c.warnings) for c in checks),
-              "skipped": [c.error for c in bad]}
-    for how, n in _tally(c.table_frame.split()[0] for c in good).items():
-        report[f"table_frame.{how}"] = n
-    return report, tracking
-
-
-def _tally(values) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for v in values:
-        out[v] = out.get(v, 0) + 1
-    return out
+    extra = {"dropped_frames": sum(c.dropped for c in good), "skipped_chunks": sum(c.skipped_chunks for c in good),
+             "truncated_recordings": sum(c.truncated for c in good), "warnings": sum(len(c.warnings) for c in checks),
+             "skipped": [c.error for c in bad]}
+    extra |= {f"table_frame.{how}": n for how, n in Counter(c.table_frame.split()[0] for c in good).items()}
+    return counts, fps, extra, tracking
