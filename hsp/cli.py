@@ -148,7 +148,7 @@ def parse(
     info_topic: Optional[str] = typer.Option(None, help="colour CameraInfo topic"),
     intrinsics: Optional[str] = typer.Option(None, help="fx,fy,cx,cy in pixels, for recordings without CameraInfo"),
     camera_pose: Optional[str] = typer.Option(None, help="x,y,z,qx,qy,qz,qw of the colour optical frame in the table "
-                                              "frame (z = 0 on the table, z up) [/tf_static, else fitted to the depth]"),
+                                              "frame (z = 0 on the table, z up) (default: from /tf_static, else fitted to the depth)"),
     skip_bad: bool = typer.Option(False, "--skip-bad",
                                   help="leave out recordings that fail the check (listed in parse.json)"),
     reports: Path = typer.Option(Path("reports"), help="reports directory"),

@@ -20,6 +20,14 @@ def test_tasks_lists_the_four_tasks_and_their_objects():
     assert "hand (hand)" in result.output and "bolt_4 (bolt)" in result.output, result.output  # the labels
 
 
+def test_every_command_has_help():
+    """Help texts go through rich markup: a bracket that reads as a closing tag breaks --help."""
+    for command in app.registered_commands:
+        name = command.name or command.callback.__name__
+        result = runner.invoke(app, [name, "--help"], terminal_width=200)
+        assert result.exit_code == 0 and "Usage" in result.output, (name, result.output[-300:])
+
+
 def test_record_writes_recordings_and_report(tmp_path):
     out, reports = tmp_path / "rec", tmp_path / "reports"
     args = ["record", "stacking-2", "--episodes", "2", "--seed", "4", "--out", str(out), "--reports", str(reports),
