@@ -29,7 +29,7 @@ from hsp.perception.metrics import auc, episode_errors, match_identical
 from hsp.perception.table import TableConfig, table_frame
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
-from hsp.recording.reader import ReadOptions, find_recordings, read_recording
+from hsp.recording.reader import ReadOptions, find_recordings, read_recording, recording_name
 from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
@@ -38,14 +38,16 @@ RATE_TOLERANCE = 0.05
 """A recording whose measured frame rate is further than this fraction from the dataset's is refused."""
 
 
-def _ground_truth_episodes(task: Task, recordings: list[Path], first: GroundTruth, fps: int) -> Iterator[EpisodePoses]:
+def _ground_truth_episodes(task: Task, recordings: list[Path], root: Path, first: GroundTruth,
+                           fps: int) -> Iterator[EpisodePoses]:
     for k, path in enumerate(recordings):
         gt = first if k == 0 else read_ground_truth(path)
         if gt.objects != task.names:
             raise HspError(f"{path}: objects {gt.objects} do not match task {task.name!r} {task.names}")
         if int(gt.metadata.get("fps", fps)) != fps:
             raise HspError(f"{path}: recorded at {gt.metadata['fps']} fps, the other recordings at {fps}")
-        yield EpisodePoses(str(path), gt.poses, np.full(gt.poses.shape[:2], TrackStatus.OK, np.int64))
+        yield EpisodePoses(recording_name(path, root), gt.poses, np.full(gt.poses.shape[:2], TrackStatus.OK, np.int64),
+                           table_frame="ground truth")
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,8 @@ class TrackJob:
     task: str
     pipeline_dir: Path
     path: Path
+    name: str
+    """The recording's name in the dataset (:func:`recording_name`)."""
     options: ReadOptions
     cfg: TrackerConfig
     seed: int
@@ -141,7 +145,8 @@ def _track_one(job: TrackJob) -> TrackOutcome:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
         order = match_identical(identical_groups(task), tracked.poses, gt.poses)
         errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses[:, order], gt.poses)
-    return TrackOutcome(EpisodePoses(str(job.path), tracked.poses, tracked.status), frames, tracked.seconds, errors)
+    episode = EpisodePoses(job.name, tracked.poses, tracked.status, job.T_world_cam, job.table_frame)
+    return TrackOutcome(episode, frames, tracked.seconds, errors)
 
 
 @contextmanager
@@ -251,9 +256,9 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     if poses_from == "ground-truth":
         first = read_ground_truth(recordings[0])
         fps = int(first.metadata.get("fps", 0)) or round(frame_rate(first.stamps_ns)[0])
-        counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
+        counts = write_dataset(task, _ground_truth_episodes(task, recordings, recordings_dir, first, fps), out_dir, fps)
     else:
-        counts, fps, extra, tracking = _parse_tracked(task, recordings, out_dir, workers, options, cfg, seed, table,
+        counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg, seed, table,
                                                       skip_bad, start)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
@@ -261,12 +266,13 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds, **extra}, tracking
 
 
-def _parse_tracked(task: Task, recordings: list[Path], out_dir: Path, workers: int, options: ReadOptions,
+def _parse_tracked(task: Task, recordings: list[Path], root: Path, out_dir: Path, workers: int, options: ReadOptions,
                    cfg: TrackerConfig, seed: int, table: TableConfig, skip_bad: bool, start: float):
     """Check every recording, then track the good ones into the dataset: counts, frame rate,
     the check's part of the parse report and the tracking report."""
     object_models(task, cfg, seed)  # a missing mesh fails here, before any work
-    jobs = [TrackJob(task.name, task.objects_dir.parent, p, options, cfg, seed, table) for p in recordings]
+    jobs = [TrackJob(task.name, task.objects_dir.parent, p, recording_name(p, root), options, cfg, seed, table)
+            for p in recordings]
     with _pool(workers) as pool:
         checks = check_recordings(task, jobs, pool)
         readable = [c for c in checks if not c.error]

@@ -105,6 +105,13 @@ def is_bag_directory(path: Path) -> bool:
     return path.is_dir() and (path / "metadata.yaml").is_file()
 
 
+def recording_name(path: Path, root: Path) -> str:
+    """How a dataset names the recording ``path`` found in ``root`` (:func:`find_recordings`):
+    its path relative to the folder, or its own name when ``root`` is the recording."""
+    path, root = Path(path), Path(root)
+    return path.name if path == root else path.relative_to(root).as_posix()
+
+
 def find_recordings(path: Path) -> list[Path]:
     """The recordings ``path`` names: one rosbag2 directory, ``.mcap`` file or ROS 1 ``.bag``
     file, or a folder of them (sorted)."""

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from hsp.cli import app
 from hsp.dataset.build import RecordingCheck, dataset_rate
-from hsp.dataset.reader import load_episodes
+from hsp.dataset.reader import episode_recordings, episode_sources, load_episodes
 from hsp.errors import HspError
 from hsp.recording.record import RecordConfig, record
 from hsp.recording.writer import CameraRig
@@ -53,7 +53,7 @@ def assert_failed_cleanly(result, tmp_path, message):
     assert result.exit_code == 1, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and message in errors[0], result.output
-    assert "Traceback" not in result.output
+    assert isinstance(result.exception, SystemExit), result.exception  # hsp's own error, not an escaped exception
     assert not (tmp_path / "ds").exists() and not list(tmp_path.glob(".ds*"))  # no dataset, no hidden partial one
 
 
@@ -76,6 +76,23 @@ def test_a_bad_file_among_good_ones(good, tmp_path, name, content, message):
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "reports" / "stacking-1" / "parse.json").read_text())
     assert report["episodes"] == 2 and len(report["skipped"]) == 1 and message in report["skipped"][0]
+
+
+def test_skipped_recordings_do_not_shift_the_episodes(good, tmp_path):
+    """Episodes name the recording they came from: label (and train, view) find each
+    episode's own recording when --skip-bad left one out before it."""
+    d = folder(good, tmp_path, "episode_000000a.mcap", b"")
+    assert parse(d, tmp_path, "--skip-bad").exit_code == 0
+    sources = episode_sources(tmp_path / "ds")
+    assert [s["source"] for s in sources] == ["episode_000000.mcap", "episode_000001.mcap"]
+    assert all(s["table_frame"] == "tf_static world" and len(s["T_world_cam"]) == 7 for s in sources)
+    assert episode_recordings(tmp_path / "ds", d) == [d / "episode_000000.mcap", d / "episode_000001.mcap"]
+    result = runner.invoke(app, ["label", "stacking-1", "--dataset", str(tmp_path / "ds"), "--recordings", str(d),
+                                 "--out", str(tmp_path / "labels.parquet"), "--reports", str(tmp_path / "reports")])
+    assert result.exit_code == 0, result.output
+    (d / "episode_000001.mcap").unlink()
+    with pytest.raises(HspError, match="no recording 'episode_000001.mcap', which episode 1 of"):
+        episode_recordings(tmp_path / "ds", d)
 
 
 def test_mismatched_resolutions(good, tmp_path):
