@@ -101,7 +101,7 @@ def check_recording(job: TrackJob) -> RecordingCheck:
             if len(rec.stamps_ns) < 2:
                 raise HspError(f"{job.path}: {len(rec.stamps_ns)} usable frame(s); an episode needs at least 2")
             fps, dropped = frame_rate(rec.stamps_ns)
-            T, how = table_frame(rec.depth[0], rec.K, rec.T_world_cam, rec.tf_root, job.options.camera_pose, job.table,
+            T, how = table_frame(rec.depth, rec.K, rec.T_world_cam, rec.tf_root, job.options.camera_pose, job.table,
                                  job.seed, str(job.path))
         except HspError as e:
             return RecordingCheck(job.path, error=str(e), warnings=warnings)
@@ -223,16 +223,15 @@ def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall
 
 
 def dataset_rate(checks: list[RecordingCheck], tolerance: float) -> int:
-    """The dataset's frame rate: the most common whole rate among the recordings; those more
-    than ``tolerance`` (a fraction) off it are marked bad. LeRobot stores a whole number of
-    frames per second, so a rate that is not one (7.5 fps) is refused for all."""
-    rates = [round(c.fps) for c in checks]
+    """The dataset's frame rate: the most common among the recordings' rates that are whole
+    numbers (within ``tolerance``, a fraction), as LeRobot stores a whole number of frames per
+    second; the recordings further than that from it are marked bad."""
+    rates = [round(c.fps) for c in checks if round(c.fps) > 0 and abs(c.fps - round(c.fps)) <= tolerance * round(c.fps)]
+    if not rates:
+        raise HspError(f"{checks[0].path}: recorded at {checks[0].fps:.2f} fps; a LeRobot dataset needs a whole number "
+                       "of frames per second (record at 6, 15, 30 or 60 fps)")
     fps = max(set(rates), key=lambda r: (rates.count(r), r))
     near = [c for c in checks if abs(c.fps - fps) <= tolerance * fps]
-    if not near:
-        c = next(c for c in checks if round(c.fps) == fps)
-        raise HspError(f"{c.path}: recorded at {c.fps:.2f} fps; a LeRobot dataset needs a whole number of frames "
-                       "per second (record at 6, 15, 30 or 60 fps)")
     for c in checks:
         if c not in near:
             c.error = (f"{c.path}: recorded at {c.fps:.2f} fps, {len(near)} other recording(s) at {fps} fps; "

@@ -82,7 +82,9 @@ def test_skipped_recordings_do_not_shift_the_episodes(good, tmp_path):
     """Episodes name the recording they came from: label (and train, view) find each
     episode's own recording when --skip-bad left one out before it."""
     d = folder(good, tmp_path, "episode_000000a.mcap", b"")
-    assert parse(d, tmp_path, "--skip-bad").exit_code == 0
+    result = parse(d, tmp_path, "--skip-bad")
+    assert result.exit_code == 0, result.output
+    assert "WARNING" in result.output and "codec" not in result.output  # no video, no LeRobot codec line
     sources = episode_sources(tmp_path / "ds")
     assert [s["source"] for s in sources] == ["episode_000000.mcap", "episode_000001.mcap"]
     assert all(s["table_frame"] == "tf_static world" and len(s["T_world_cam"]) == 7 for s in sources)
@@ -151,3 +153,6 @@ def test_the_dataset_rate_is_the_common_whole_one():
     assert "e2.mcap: recorded at 7.50 fps, 3 other recording(s) at 15 fps" in checks[2].error
     with pytest.raises(HspError, match="e0.mcap: recorded at 7.50 fps; a LeRobot dataset needs a whole number"):
         dataset_rate([RecordingCheck(Path("e0.mcap"), fps=7.5)], 0.05)
+    # more recordings at a rate that is not whole than at one that is: the whole one is the dataset's
+    checks = [RecordingCheck(Path(f"e{k}.mcap"), fps=f) for k, f in enumerate([7.5, 7.5, 7.5, 15.0, 15.0])]
+    assert dataset_rate(checks, 0.05) == 15 and [bool(c.error) for c in checks] == [True, True, True, False, False]
