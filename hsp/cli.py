@@ -146,7 +146,7 @@ def parse(
     color_topic: Optional[str] = typer.Option(None, help="colour Image topic, if not the RealSense driver's"),
     depth_topic: Optional[str] = typer.Option(None, help="depth Image topic, registered to colour"),
     info_topic: Optional[str] = typer.Option(None, help="colour CameraInfo topic"),
-    intrinsics: Optional[str] = typer.Option(None, help="fx,fy,cx,cy in pixels, for recordings without CameraInfo"),
+    intrinsics: Optional[str] = typer.Option(None, help="fx,fy,cx,cy in pixels, instead of the recording's CameraInfo"),
     camera_pose: Optional[str] = typer.Option(None, help="x,y,z,qx,qy,qz,qw of the colour optical frame in the table "
                                               "frame (z = 0 on the table, z up) (default: from /tf_static, else fitted to the depth)"),
     skip_bad: bool = typer.Option(False, "--skip-bad",

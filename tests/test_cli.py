@@ -107,14 +107,14 @@ def test_parse_ground_truth_ablation(tmp_path, monkeypatch):
     sup = json.loads((reports / "painting" / "supervised" / "train.json").read_text())
     assert sup["frames"] == trained["frames"] and sup["final_loss"] != trained["final_loss"]
     # on true poses the annotation's labels are the demonstrator's own, way-points where each segment ends
-    from hsp.dataset.reader import load_episodes
+    from hsp.dataset.reader import episode_recordings, load_episodes
     from hsp.policy.stage import annotation_labels
     from hsp.recording.ground_truth import read_ground_truth
     from hsp.tasks.registry import load_task
 
     task = load_task("painting")
     poses = load_episodes(ds, "painting", task.names)[0]
-    (lab,), gt = annotation_labels(task, rec, poses), read_ground_truth(next(rec.glob("*.mcap")))
+    (lab,), gt = annotation_labels(task, episode_recordings(ds, rec), poses), read_ground_truth(next(rec.glob("*.mcap")))
     assert (lab.tool == gt.tool).all() and (lab.target == gt.target).all()
     ends = np.flatnonzero(np.diff(gt.waypoint_index))
     assert set(lab.waypoint_index) == set(ends) | {len(gt.tool) - 1}

@@ -64,7 +64,7 @@ def train_baseline(task: Task, method: str, dataset_dir: Path, out_dir: Path, cf
     log.info("train %s %s: read %d episodes (%d frames) from %s", task.name, method, len(demos),
              sum(len(o) for o in demos.obs), dataset_dir)
     if method == "taco":
-        sketches = annotated_sketches(task, poses, recordings_dir)
+        sketches = annotated_sketches(task, poses, dataset_dir, recordings_dir)
         model, report = module.train(demos, sketches, task.names, cfg, seed, str(recordings_dir))
     elif method == "gail":
         from hsp.evaluation.env import EnvConfig, HspEnv

@@ -58,15 +58,18 @@ IMPOSSIBLE = -1e30
 logaddexp(−inf, −inf) is NaN and would poison every weight."""
 
 
-def annotated_sketches(task: Task, poses: list[np.ndarray], recordings_dir: Path | None) -> list[list[str]]:
+def annotated_sketches(task: Task, poses: list[np.ndarray], dataset_dir: Path,
+                       recordings_dir: Path | None) -> list[list[str]]:
     """Per dataset episode of world poses ``(H, n, 7)``, the sketch of the demonstrator's
     annotation in ``recordings_dir`` (TACO's weak supervision), its objects matched to the
     tracker's as the supervised labels are."""
+    from hsp.dataset.reader import episode_recordings
     from hsp.policy.stage import annotation_labels
 
     if recordings_dir is None:
         raise HspError("taco needs the recordings with the demonstrator's annotation for its sketches (--recordings)")
-    return [sketch_of(lab.tool, lab.target, task.names) for lab in annotation_labels(task, recordings_dir, poses)]
+    labels = annotation_labels(task, episode_recordings(dataset_dir, recordings_dir), poses)
+    return [sketch_of(lab.tool, lab.target, task.names) for lab in labels]
 
 
 def sketch_of(tool: np.ndarray, target: np.ndarray, names: list[str]) -> list[str]:

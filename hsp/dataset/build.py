@@ -29,7 +29,7 @@ from hsp.perception.metrics import auc, episode_errors, match_identical
 from hsp.perception.table import TableConfig, table_frame
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
-from hsp.recording.reader import ReadOptions, find_recordings, read_recording
+from hsp.recording.reader import ReadOptions, find_recordings, read_recording, recording_name
 from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
@@ -38,14 +38,16 @@ RATE_TOLERANCE = 0.05
 """A recording whose measured frame rate is further than this fraction from the dataset's is refused."""
 
 
-def _ground_truth_episodes(task: Task, recordings: list[Path], first: GroundTruth, fps: int) -> Iterator[EpisodePoses]:
+def _ground_truth_episodes(task: Task, recordings: list[Path], root: Path, first: GroundTruth,
+                           fps: int) -> Iterator[EpisodePoses]:
     for k, path in enumerate(recordings):
         gt = first if k == 0 else read_ground_truth(path)
         if gt.objects != task.names:
             raise HspError(f"{path}: objects {gt.objects} do not match task {task.name!r} {task.names}")
         if int(gt.metadata.get("fps", fps)) != fps:
             raise HspError(f"{path}: recorded at {gt.metadata['fps']} fps, the other recordings at {fps}")
-        yield EpisodePoses(str(path), gt.poses, np.full(gt.poses.shape[:2], TrackStatus.OK, np.int64))
+        yield EpisodePoses(recording_name(path, root), gt.poses, np.full(gt.poses.shape[:2], TrackStatus.OK, np.int64),
+                           table_frame="ground truth")
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,8 @@ class TrackJob:
     task: str
     pipeline_dir: Path
     path: Path
+    name: str
+    """The recording's name in the dataset (:func:`recording_name`)."""
     options: ReadOptions
     cfg: TrackerConfig
     seed: int
@@ -97,7 +101,7 @@ def check_recording(job: TrackJob) -> RecordingCheck:
             if len(rec.stamps_ns) < 2:
                 raise HspError(f"{job.path}: {len(rec.stamps_ns)} usable frame(s); an episode needs at least 2")
             fps, dropped = frame_rate(rec.stamps_ns)
-            T, how = table_frame(rec.depth[0], rec.K, rec.T_world_cam, rec.tf_root, job.options.camera_pose, job.table,
+            T, how = table_frame(rec.depth, rec.K, rec.T_world_cam, rec.tf_root, job.options.camera_pose, job.table,
                                  job.seed, str(job.path))
         except HspError as e:
             return RecordingCheck(job.path, error=str(e), warnings=warnings)
@@ -141,7 +145,8 @@ def _track_one(job: TrackJob) -> TrackOutcome:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
         order = match_identical(identical_groups(task), tracked.poses, gt.poses)
         errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses[:, order], gt.poses)
-    return TrackOutcome(EpisodePoses(str(job.path), tracked.poses, tracked.status), frames, tracked.seconds, errors)
+    episode = EpisodePoses(job.name, tracked.poses, tracked.status, job.T_world_cam, job.table_frame)
+    return TrackOutcome(episode, frames, tracked.seconds, errors)
 
 
 @contextmanager
@@ -218,16 +223,15 @@ def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall
 
 
 def dataset_rate(checks: list[RecordingCheck], tolerance: float) -> int:
-    """The dataset's frame rate: the most common whole rate among the recordings; those more
-    than ``tolerance`` (a fraction) off it are marked bad. LeRobot stores a whole number of
-    frames per second, so a rate that is not one (7.5 fps) is refused for all."""
-    rates = [round(c.fps) for c in checks]
+    """The dataset's frame rate: the most common among the recordings' rates that are whole
+    numbers (within ``tolerance``, a fraction), as LeRobot stores a whole number of frames per
+    second; the recordings further than that from it are marked bad."""
+    rates = [round(c.fps) for c in checks if round(c.fps) > 0 and abs(c.fps - round(c.fps)) <= tolerance * round(c.fps)]
+    if not rates:
+        raise HspError(f"{checks[0].path}: recorded at {checks[0].fps:.2f} fps; a LeRobot dataset needs a whole number "
+                       "of frames per second (record at 6, 15, 30 or 60 fps)")
     fps = max(set(rates), key=lambda r: (rates.count(r), r))
     near = [c for c in checks if abs(c.fps - fps) <= tolerance * fps]
-    if not near:
-        c = next(c for c in checks if round(c.fps) == fps)
-        raise HspError(f"{c.path}: recorded at {c.fps:.2f} fps; a LeRobot dataset needs a whole number of frames "
-                       "per second (record at 6, 15, 30 or 60 fps)")
     for c in checks:
         if c not in near:
             c.error = (f"{c.path}: recorded at {c.fps:.2f} fps, {len(near)} other recording(s) at {fps} fps; "
@@ -251,9 +255,9 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     if poses_from == "ground-truth":
         first = read_ground_truth(recordings[0])
         fps = int(first.metadata.get("fps", 0)) or round(frame_rate(first.stamps_ns)[0])
-        counts = write_dataset(task, _ground_truth_episodes(task, recordings, first, fps), out_dir, fps)
+        counts = write_dataset(task, _ground_truth_episodes(task, recordings, recordings_dir, first, fps), out_dir, fps)
     else:
-        counts, fps, extra, tracking = _parse_tracked(task, recordings, out_dir, workers, options, cfg, seed, table,
+        counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg, seed, table,
                                                       skip_bad, start)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
@@ -261,12 +265,13 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
     return {**counts, "poses_from": poses_from, "fps": fps, "seconds": seconds, **extra}, tracking
 
 
-def _parse_tracked(task: Task, recordings: list[Path], out_dir: Path, workers: int, options: ReadOptions,
+def _parse_tracked(task: Task, recordings: list[Path], root: Path, out_dir: Path, workers: int, options: ReadOptions,
                    cfg: TrackerConfig, seed: int, table: TableConfig, skip_bad: bool, start: float):
     """Check every recording, then track the good ones into the dataset: counts, frame rate,
     the check's part of the parse report and the tracking report."""
     object_models(task, cfg, seed)  # a missing mesh fails here, before any work
-    jobs = [TrackJob(task.name, task.objects_dir.parent, p, options, cfg, seed, table) for p in recordings]
+    jobs = [TrackJob(task.name, task.objects_dir.parent, p, recording_name(p, root), options, cfg, seed, table)
+            for p in recordings]
     with _pool(workers) as pool:
         checks = check_recordings(task, jobs, pool)
         readable = [c for c in checks if not c.error]

@@ -5,7 +5,7 @@ the world poses of the other objects flattened to 1-D (LeRobot's ACT and Diffusi
 train on it without images, and ≥ 2-D features break LeRobot's dataset tools), ``action``
 the change a_t of e_t to the next frame (translation in the world frame + rotation vector),
 ``tracking_status`` one code per object. Object names, labels and symmetries
-ride along in the feature metadata.
+ride along in the feature metadata; each episode's source in :data:`EPISODE_SOURCES`.
 """
 
 from __future__ import annotations
@@ -21,6 +21,10 @@ ENV_STATE = "observation.environment_state"
 ACTION = "action"
 STATUS = "tracking_status"
 """Not an ``observation.*`` key: LeRobot's policies take every one of those as an input."""
+EPISODE_SOURCES = "meta/hsp_episodes.jsonl"
+"""One line per episode: the recording it came from (its name within the recordings folder)
+and the table frame it was tracked in, ``T_world_cam`` and how it was found. LeRobot's own
+episode metadata has no place for them."""
 
 
 class TrackStatus(IntEnum):

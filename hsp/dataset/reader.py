@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
 import numpy as np
 
-from hsp.dataset.features import ENV_STATE, STATE, STATUS
+from hsp.dataset.features import ENV_STATE, EPISODE_SOURCES, STATE, STATUS
 from hsp.errors import HspError
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -43,3 +44,31 @@ def load_episodes(dataset_dir: Path, task_name: str,
     ends = ds.meta.episodes["dataset_to_index"]
     return ([poses[s:e] for s, e in zip(starts, ends)], [status[s:e] for s, e in zip(starts, ends)],
             {"objects": names, "tasks": sorted(set(ds.meta.tasks.index)), "fps": ds.fps})
+
+
+def episode_sources(dataset_dir: Path) -> list[dict]:
+    """Per episode: ``source`` (the recording's name), ``table_frame`` and ``T_world_cam``
+    (7 numbers or ``None``), as ``hsp parse`` wrote them."""
+    path = Path(dataset_dir) / EPISODE_SOURCES
+    if not path.is_file():
+        raise HspError(f"{dataset_dir}: no {EPISODE_SOURCES} (written by an older hsp); re-run `hsp parse`")
+    try:
+        return [json.loads(line) for line in path.read_text().splitlines()]
+    except json.JSONDecodeError as e:
+        raise HspError(f"{path}: not JSON lines ({e})") from None
+
+
+def episode_recordings(dataset_dir: Path, recordings: Path) -> list[Path]:
+    """The recording in ``recordings`` (a folder, a bag or a file, as ``hsp parse`` was given
+    it) that each episode of ``dataset_dir`` was parsed from, matched by name: recordings that
+    ``--skip-bad`` left out do not shift the others."""
+    from hsp.recording.reader import find_recordings, recording_name
+
+    found = {recording_name(p, recordings): p for p in find_recordings(recordings)}
+    out = []
+    for info in episode_sources(dataset_dir):
+        if info["source"] not in found:
+            raise HspError(f"{recordings}: no recording {info['source']!r}, which episode {info['episode_index']} of "
+                           f"{dataset_dir} was parsed from ({len(found)} found)")
+        out.append(found[info["source"]])
+    return out

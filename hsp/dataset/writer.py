@@ -8,6 +8,7 @@ and then renamed into place; a failure leaves no dataset behind.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hsp.dataset.features import ACTION, ENV_STATE, STATE, STATUS, TrackStatus, features
+from hsp.dataset.features import ACTION, ENV_STATE, EPISODE_SOURCES, STATE, STATUS, TrackStatus, features
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
 from hsp.geometry import rotvec_delta
@@ -29,8 +30,16 @@ class EpisodePoses:
     """World poses of one episode: ``poses (T, n, 7)`` in task order, ``status (T, n)``."""
 
     source: str
+    """The recording's name within the recordings folder (:func:`hsp.recording.reader.recording_name`)."""
     poses: np.ndarray
     status: np.ndarray
+    T_world_cam: np.ndarray | None = None
+    """The camera pose (7,) in the table frame the poses are in, and how that frame was found."""
+    table_frame: str = ""
+
+    def info(self, index: int) -> dict:
+        T = None if self.T_world_cam is None else [float(v) for v in self.T_world_cam]
+        return {"episode_index": index, "source": self.source, "table_frame": self.table_frame, "T_world_cam": T}
 
 
 def actions(ee: np.ndarray, status: np.ndarray) -> np.ndarray:
@@ -77,7 +86,10 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
         ds = LeRobotDataset.create(repo_id(task), fps=fps, features=features(task), root=tmp, use_videos=False,
                                    robot_type="hsp")
         try:
-            lengths = [_add_episode(ds, task, ep) for ep in episodes]
+            lengths, infos = [], []
+            for ep in episodes:
+                lengths.append(_add_episode(ds, task, ep))
+                infos.append(ep.info(len(infos)))
             if not lengths:
                 raise HspError("no episodes to write")
         except BaseException:
@@ -85,6 +97,7 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
                 ds.finalize()                      # would re-create tmp/meta after the clean-up: flush it now
             raise
         ds.finalize()
+        (tmp / EPISODE_SOURCES).write_text("".join(json.dumps(i) + "\n" for i in infos))
         check = LeRobotDataset(repo_id(task), root=tmp)
         if len(check) != sum(lengths) or check.num_episodes != len(lengths):
             raise HspError(f"{tmp}: wrote {len(lengths)} episodes / {sum(lengths)} frames "

@@ -12,7 +12,7 @@ import pandas as pd
 from rich.progress import track
 
 from hsp.dataset.build import identical_groups
-from hsp.dataset.reader import load_episodes
+from hsp.dataset.reader import episode_recordings, load_episodes
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
 from hsp.geometry import compose, relative
@@ -22,7 +22,6 @@ from hsp.labeling.metrics import label_metrics
 from hsp.labeling.priors import PriorConfig
 from hsp.perception.metrics import match_identical
 from hsp.recording.ground_truth import GroundTruth, read_ground_truth
-from hsp.recording.reader import find_recordings
 from hsp.tasks.registry import Task
 
 log = logging.getLogger(__name__)
@@ -88,6 +87,7 @@ def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfi
     recordings' annotation when ``recordings_dir`` is given."""
     start = time.perf_counter()
     poses, status, _ = load_episodes(dataset_dir, task.name, task.names)
+    recs = None if recordings_dir is None else episode_recordings(dataset_dir, recordings_dir)
     symmetries = [o.symmetry for o in task.objects]
     report: dict[str, float | int] = {"episodes": len(poses), "frames": int(sum(len(p) for p in poses))}
     if em is None:
@@ -98,10 +98,7 @@ def label_dataset(task: Task, dataset_dir: Path, out_file: Path, cfg: PriorConfi
         report |= {"em_rounds": len(changed), "em_changed_fraction_last": changed[-1] if changed else 0.0}
     with atomic_path(Path(out_file)) as tmp:
         labels_frame(labels).to_parquet(tmp, index=False)
-    if recordings_dir is not None:
-        recs = find_recordings(recordings_dir)
-        if len(recs) != len(labels):
-            raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(labels)} dataset episodes")
+    if recs is not None:
         truth, pred = [], []
         groups = identical_groups(task)
         for path, p, lab in zip(recs, poses, labels):

@@ -3,7 +3,8 @@
 A recording made by ``hsp record`` carries it on ``/tf_static``; one from the RealSense
 driver carries only the camera's own frames (``camera_link`` → ``camera_color_frame`` →
 ``camera_color_optical_frame``), whose root is no table. So the table plane is always fitted
-in the first frame's depth (Open3D's RANSAC plane segmentation, refined by least squares on
+in the depth of the first frames (their per-pixel median, so that one bad frame or a hand
+passing does not decide it; Open3D's RANSAC plane segmentation, refined by least squares on
 its inliers), and the frame used is, in this order:
 
 1. the camera pose the user gives (``--camera-pose``);
@@ -15,6 +16,7 @@ its inliers), and the frame used is, in this order:
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +40,8 @@ class TableConfig:
     """Every ``stride``-th pixel row and column."""
     iterations: int = 500
     """RANSAC iterations."""
+    frames: int = 5
+    """The plane is fitted in the per-pixel median depth of the recording's first frames."""
 
 
 @dataclass(frozen=True)
@@ -50,20 +54,30 @@ class TablePlane:
     """Share of the depth readings on the plane."""
 
 
+def median_depth(depth: np.ndarray) -> np.ndarray:
+    """Per-pixel median ``(H, W)`` of the readings in ``depth (N, H, W)`` m (0 = none), 0 where none."""
+    readings = np.where(depth > 0, depth, np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # pixels with no reading in any frame
+        return np.nan_to_num(np.nanmedian(readings, axis=0), nan=0.0).astype(np.float32)
+
+
 def fit_table(depth: np.ndarray, K: np.ndarray, cfg: TableConfig = TableConfig(), seed: int = 0,
               source: str = "depth") -> TablePlane:
-    """The dominant plane of ``depth (H, W)`` m; a one-line error naming ``source`` if there is none."""
+    """The dominant plane in ``depth``, the first frames ``(N, H, W)`` m (or one, ``(H, W)``);
+    a one-line error naming ``source`` if there is none."""
     import open3d as o3d
 
+    depth = median_depth(depth[: cfg.frames]) if depth.ndim == 3 else depth
     pts = camera_points(depth, K, cfg.stride)[0]
     if len(pts) < 100:
-        raise HspError(f"{source}: {len(pts)} depth readings in the first frame; too few to find the table")
+        raise HspError(f"{source}: {len(pts)} depth readings in the first frames; too few to find the table")
     o3d.utility.random.seed(seed)
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
     _, idx = cloud.segment_plane(cfg.inlier_m, 3, cfg.iterations)
     share = len(idx) / len(pts)
     if share < cfg.min_inliers:
-        raise HspError(f"{source}: no table in the first frame (the largest plane holds {share:.0%} of the depth, "
+        raise HspError(f"{source}: no table in the first frames (the largest plane holds {share:.0%} of the depth, "
                        f"parse.table.min_inliers is {cfg.min_inliers:.0%}); give the camera pose with --camera-pose")
     on = pts[idx]
     centre = on.mean(axis=0)
@@ -98,7 +112,7 @@ def plane_offset(plane: TablePlane, T_world_cam: np.ndarray) -> tuple[float, flo
 
 def table_frame(depth: np.ndarray, K: np.ndarray, T_tf: np.ndarray | None, tf_root: str, given: np.ndarray | None,
                 cfg: TableConfig = TableConfig(), seed: int = 0, source: str = "depth") -> tuple[np.ndarray, str]:
-    """``T_world_cam (7,)`` of the first frame and how it was found (see the module docstring)."""
+    """``T_world_cam (7,)`` from the first frames ``depth (N, H, W)`` and how it was found (see the module docstring)."""
     if given is not None:
         return np.asarray(given, float), "given"
     plane = fit_table(depth, K, cfg, seed, source)

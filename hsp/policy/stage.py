@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from hsp.dataset.features import TrackStatus
-from hsp.dataset.reader import load_episodes
+from hsp.dataset.reader import episode_recordings, load_episodes
 from hsp.errors import HspError
 from hsp.labeling.em import Fit, ScoreModel, em_label
 from hsp.geometry import relative
@@ -39,7 +39,7 @@ def symmetry_folds(task: Task) -> np.ndarray:
     return np.array([z_folds(o.symmetry) for o in task.objects])
 
 
-def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray]) -> list[EpisodeLabels]:
+def annotation_labels(task: Task, recordings: list[Path], poses: list[np.ndarray]) -> list[EpisodeLabels]:
     """The demonstrator's own annotation as labels of the dataset's episodes (the
     ``supervised`` upper bound): its tool and target, mapped onto the tracker's object
     identities (identical objects are matched by distance, as the label metrics do), and
@@ -48,13 +48,9 @@ def annotation_labels(task: Task, recordings_dir: Path, poses: list[np.ndarray])
     from hsp.dataset.build import identical_groups
     from hsp.perception.metrics import match_identical
     from hsp.recording.ground_truth import read_ground_truth
-    from hsp.recording.reader import find_recordings
 
-    recs = find_recordings(recordings_dir)
-    if len(recs) != len(poses):
-        raise HspError(f"{recordings_dir}: {len(recs)} recordings for {len(poses)} dataset episodes")
     groups, out = identical_groups(task), []
-    for path, p in zip(recs, poses):
+    for path, p in zip(recordings, poses, strict=True):
         gt = read_ground_truth(path)
         if len(gt.tool) != len(p) or gt.objects != task.names:
             raise HspError(f"{path}: annotation of {len(gt.tool)} frames of {gt.objects}, the dataset episode has {len(p)} "
@@ -99,7 +95,7 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     if labels_file is not None:
         labels = read_labels(labels_file, [len(p) for p in poses], len(task.objects))
     else:
-        labels = annotation_labels(task, recordings_dir, poses)  # type: ignore[arg-type]
+        labels = annotation_labels(task, episode_recordings(dataset_dir, recordings_dir), poses)  # type: ignore[arg-type]
     source = labels_file or recordings_dir
     steps = labelled_steps(task, world, status, labels, cfg)
     classes, n_classes = semantic_classes(task)

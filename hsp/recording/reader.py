@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,7 +44,6 @@ RECORDING_SUFFIXES = (".mcap", ".bag")
 IMAGE_SCHEMA = "sensor_msgs/msg/Image"
 INFO_SCHEMA = "sensor_msgs/msg/CameraInfo"
 TF_SCHEMA = "tf2_msgs/msg/TFMessage"
-READ_TYPES = (IMAGE_SCHEMA, INFO_SCHEMA, TF_SCHEMA)
 COLOR_ENCODINGS = {"rgb8": (3, [0, 1, 2]), "bgr8": (3, [2, 1, 0]), "rgba8": (4, [0, 1, 2]), "bgra8": (4, [2, 1, 0])}
 DEPTH_ENCODINGS = {"16UC1": np.uint16, "mono16": np.uint16, "32FC1": np.float32}
 
@@ -105,18 +105,36 @@ def is_bag_directory(path: Path) -> bool:
     return path.is_dir() and (path / "metadata.yaml").is_file()
 
 
+def recording_name(path: Path, root: Path) -> str:
+    """How a dataset names the recording ``path`` found in ``root`` (:func:`find_recordings`):
+    its path relative to the folder, or its own name when ``root`` is the recording."""
+    path, root = Path(path), Path(root)
+    return path.name if path == root else path.relative_to(root).as_posix()
+
+
+def _looks_like_bag(path: Path) -> bool:
+    """A rosbag2 directory, or one cut short before ``metadata.yaml`` was written (which the
+    check then reports, rather than leave it out unnoticed)."""
+    return path.is_dir() and (is_bag_directory(path) or any(path.glob("*.db3")) or any(path.glob("*.mcap")))
+
+
 def find_recordings(path: Path) -> list[Path]:
     """The recordings ``path`` names: one rosbag2 directory, ``.mcap`` file or ROS 1 ``.bag``
     file, or a folder of them (sorted)."""
     path = Path(path)
     if not path.exists():
         raise HspError(f"{path}: recordings not found")
-    if path.is_file() or is_bag_directory(path):
+    if path.is_file():
+        if is_bag_directory(path.parent):
+            raise HspError(f"{path}: one file of the rosbag2 bag {path.parent}; name the bag directory "
+                           "(a split or compressed bag is read whole)")
         return [path]
-    found = sorted(p for p in path.iterdir() if (p.is_file() and p.suffix in RECORDING_SUFFIXES) or is_bag_directory(p))
+    if is_bag_directory(path):
+        return [path]
+    found = sorted(p for p in path.iterdir() if (p.is_file() and p.suffix in RECORDING_SUFFIXES) or _looks_like_bag(p))
     if found:
         return found
-    if any(path.glob("*.db3")) or any(path.glob("*/*.db3")) or any(path.glob("*/*.mcap")):
+    if any(path.glob("*.db3")):
         raise HspError(f"{path}: a rosbag2 directory without metadata.yaml (a recording that was cut short?); "
                        "restore it with `ros2 bag reindex DIR`")
     names = ", ".join(sorted(p.name for p in path.iterdir())[:8]) or "nothing"
@@ -185,24 +203,32 @@ class _Messages:
     """(topic, log time in ns, message), in the order stored."""
 
 
-def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_messages: bool) -> _Messages:
+Choose = Callable[[dict[str, str]], set[str]]
+"""Given every topic's message type, the topics to decode."""
+
+
+def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_messages: bool,
+               choose: Choose) -> _Messages:
     """MCAP files (a bare ``.mcap`` or the files of a rosbag2 MCAP bag) with hsp's own scan,
     which keeps what survives damage. ``compressed_messages``: rosbag2's per-message zstd."""
     out = _Messages({}, [])
-    factory, decoders = DecoderFactory(), {}
+    decoders = {}
     unzip = zstandard.ZstdDecompressor()
     bad = 0
+    scanned = []
     for f in files:
         _check_mcap(f)
         schemas, channels, messages = _scan(f, report)
+        out.types |= {ch.topic: schemas[ch.schema_id].name for ch in channels.values() if ch.schema_id in schemas}
+        scanned.append((f, schemas, channels, messages))
+    wanted = choose(out.types)
+    for f, schemas, channels, messages in scanned:
+        factory = DecoderFactory()  # it caches decoders by schema id, which each file of a split bag numbers anew
         for m in messages:
             ch = channels.get(m.channel_id)
-            schema = schemas.get(ch.schema_id) if ch is not None else None
-            if schema is None:
+            if ch is None or ch.topic not in wanted or ch.schema_id not in schemas:
                 continue
-            out.types[ch.topic] = schema.name
-            if schema.name not in READ_TYPES or ch.topic.startswith(GROUND_TRUTH_PREFIX):
-                continue
+            schema = schemas[ch.schema_id]
             key = (f, ch.id)
             if key not in decoders:
                 decoders[key] = factory.decoder_for(ch.message_encoding, schema)
@@ -219,7 +245,7 @@ def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_mes
     return out
 
 
-def _read_rosbags(path: Path, report: ReadReport) -> _Messages:
+def _read_rosbags(path: Path, report: ReadReport, choose: Choose) -> _Messages:
     """A rosbag2 directory in SQLite storage or compressed per file, or a ROS 1 bag, through
     the ``rosbags`` reader; messages before a break are kept."""
     from rosbags.highlevel import AnyReader
@@ -234,8 +260,8 @@ def _read_rosbags(path: Path, report: ReadReport) -> _Messages:
         raise HspError(f"{path}: cannot read the bag ({_first_line(e)})") from None
     try:
         out.types = {c.topic: c.msgtype for c in reader.connections}
-        wanted = [c for c in reader.connections
-                  if c.msgtype in READ_TYPES and not c.topic.startswith(GROUND_TRUTH_PREFIX)]
+        topics = choose(out.types)
+        wanted = [c for c in reader.connections if c.topic in topics]
         try:
             for c, t, raw in reader.messages(connections=wanted):
                 out.messages.append((c.topic, t, reader.deserialize(raw, c.msgtype)))
@@ -252,8 +278,9 @@ def _first_line(e: BaseException) -> str:
     return f"{type(e).__name__}: {text.splitlines()[0]}" if text else type(e).__name__
 
 
-def _read_messages(path: Path, report: ReadReport) -> _Messages:
-    """Dispatch on what ``path`` is; see the module docstring."""
+def _read_messages(path: Path, report: ReadReport, choose: Choose) -> _Messages:
+    """The messages of the topics ``choose`` picks from every topic's type, decoded; dispatch
+    on what ``path`` is (see the module docstring)."""
     if not path.exists():
         raise HspError(f"{path}: no such file or directory")
     if path.is_dir():
@@ -268,16 +295,16 @@ def _read_messages(path: Path, report: ReadReport) -> _Messages:
                 raise HspError(f"{path}: metadata.yaml lists files that are missing: {missing}")
             if mode == "message" and meta.get("compression_format") != "zstd":
                 raise HspError(f"{path}: compression {meta.get('compression_format')!r} is not supported (zstd is)")
-            return _read_mcap(files, path, report, compressed_messages=mode == "message")
-        return _read_rosbags(path, report)
+            return _read_mcap(files, path, report, mode == "message", choose)
+        return _read_rosbags(path, report, choose)
     head = _magic(path)
     if head.startswith(ROS1_MAGIC):
         if path.suffix != ".bag":
             raise HspError(f"{path}: a ROS 1 bag without the .bag suffix; rename it to {path.stem}.bag")
-        return _read_rosbags(path, report)
+        return _read_rosbags(path, report, choose)
     if head.startswith(SQLITE_MAGIC):
         raise HspError(f"{path}: a rosbag2 SQLite file; name its bag directory (with metadata.yaml), not the .db3")
-    return _read_mcap([path], path, report, compressed_messages=False)
+    return _read_mcap([path], path, report, False, choose)
 
 
 def _bag_metadata(path: Path) -> dict:
@@ -326,6 +353,14 @@ def _image(msg: object, path: Path) -> tuple[str, np.ndarray]:
     raise HspError(f"{path}: unsupported image encoding {enc!r} (colour: {sorted(COLOR_ENCODINGS)}, depth: {sorted(DEPTH_ENCODINGS)})")
 
 
+def _check_intrinsics(K: np.ndarray, shape: tuple[int, int], path: Path, source: str) -> None:
+    """A pinhole camera of an image ``shape (H, W)``: focal lengths > 0, principal point inside."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    if not (np.all(np.isfinite(K)) and fx > 0 and fy > 0 and 0 < cx < shape[1] and 0 < cy < shape[0]):
+        raise HspError(f"{path}: intrinsics from {source} (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}) are not those of "
+                       f"a {shape[1]}x{shape[0]} camera; is the camera calibrated? (--intrinsics fx,fy,cx,cy overrides)")
+
+
 def _tf_pose(tf: object) -> np.ndarray:
     t, r = tf.transform.translation, tf.transform.rotation  # type: ignore[attr-defined]
     return np.array([t.x, t.y, t.z, r.x, r.y, r.z, r.w])
@@ -347,27 +382,38 @@ def _camera_pose(static: dict[str, tuple[str, np.ndarray]], frame: str) -> tuple
     return pose, node
 
 
+def _topics(types: dict[str, str], options: ReadOptions, path: Path, report: ReadReport) -> dict[str, str | None]:
+    """The colour, aligned depth and camera info topics among ``types`` (topic → message type)."""
+    if not types:
+        raise HspError(f"{path}: no readable messages")
+    color = _pick(types, IMAGE_SCHEMA, ["/color/image_raw", "/color/image_rect_raw", "/color/image"],
+                  options.color_topic, "colour", path, report)
+    depth = _pick(types, IMAGE_SCHEMA, ["aligned_depth_to_color/image_raw", "depth/image_rect_raw", "depth/image_raw"],
+                  options.depth_topic, "depth", path, report)
+    if color is None or depth is None:
+        images = sorted(t for t, ty in types.items() if ty == IMAGE_SCHEMA)
+        missing = "colour" if color is None else "depth"
+        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; all topics: {sorted(types)}"
+                       " (name them with --color-topic/--depth-topic)")
+    if "aligned_depth_to_color" not in depth and options.depth_topic is None:
+        if not any("aligned_depth_to_color" in t for t in types):
+            report.warn(f"{path}: depth topic {depth} is not the aligned one; it must be registered to colour")
+    info = _pick(types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path, report)
+    return {"color": color, "depth": depth, "info": info}
+
+
 def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recording:
     """Read and pair the RGB-D frames of one recording (see module docstring)."""
     path = Path(path)
     report = ReadReport()
-    bag = _read_messages(path, report)
-    if not bag.types:
-        raise HspError(f"{path}: no readable messages")
+    topics: dict[str, str | None] = {}
 
-    color = _pick(bag.types, IMAGE_SCHEMA, ["/color/image_raw", "/color/image_rect_raw", "/color/image"],
-                  options.color_topic, "colour", path, report)
-    depth = _pick(bag.types, IMAGE_SCHEMA, ["aligned_depth_to_color/image_raw", "depth/image_rect_raw", "depth/image_raw"],
-                  options.depth_topic, "depth", path, report)
-    if color is None or depth is None:
-        images = sorted(t for t, ty in bag.types.items() if ty == IMAGE_SCHEMA)
-        missing = "colour" if color is None else "depth"
-        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; all topics: {sorted(bag.types)}"
-                       " (name them with --color-topic/--depth-topic)")
-    if "aligned_depth_to_color" not in depth and options.depth_topic is None:
-        if not any("aligned_depth_to_color" in t for t in bag.types):
-            report.warn(f"{path}: depth topic {depth} is not the aligned one; it must be registered to colour")
-    info = _pick(bag.types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path, report)
+    def choose(types: dict[str, str]) -> set[str]:
+        topics.update(_topics(types, options, path, report))
+        return {t for t in topics.values() if t} | {"/tf_static"}
+
+    bag = _read_messages(path, report, choose)
+    color, depth, info = topics["color"], topics["depth"], topics["info"]
 
     colour_frames: dict[int, np.ndarray] = {}
     depth_frames: dict[int, np.ndarray] = {}
@@ -406,13 +452,14 @@ def read_recording(path: Path, options: ReadOptions = ReadOptions()) -> Recordin
     if c_shape != d_shape:
         raise HspError(f"{path}: depth {d_shape[1]}x{d_shape[0]} differs from colour {c_shape[1]}x{c_shape[0]}; "
                        "record the aligned depth (realsense-ros: align_depth.enable:=true)")
-    if K is None:
-        if options.intrinsics is None:
-            raise HspError(f"{path}: no CameraInfo topic and no intrinsics given (pass --intrinsics fx,fy,cx,cy)")
+    if options.intrinsics is not None:
         fx, fy, cx, cy = options.intrinsics
-        K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+        K, info = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), "--intrinsics"
+    elif K is None:
+        raise HspError(f"{path}: no CameraInfo topic and no intrinsics given (pass --intrinsics fx,fy,cx,cy)")
     elif info_size != c_shape and info_size != (0, 0):
         raise HspError(f"{path}: camera info is for {info_size[1]}x{info_size[0]}, images are {c_shape[1]}x{c_shape[0]}")
+    _check_intrinsics(K, c_shape, path, info)
 
     c_stamps = np.array(sorted(colour_frames), dtype=np.int64)
     d_stamps = np.array(sorted(depth_frames), dtype=np.int64)

@@ -8,8 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hsp.recording.reader import find_recordings
-from hsp.dataset.reader import load_episodes
+from hsp.dataset.reader import episode_recordings, episode_sources, load_episodes
 from hsp.errors import HspError
 from hsp.recording.ground_truth import matching_ground_truth
 from hsp.recording.reader import read_recording
@@ -43,31 +42,32 @@ def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Pa
     poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
     if not 0 <= episode < len(poses):
         raise HspError(f"{dataset_dir}: no episode {episode} (the dataset has 0–{len(poses) - 1})")
-    recordings = find_recordings(recordings_dir)
-    if len(recordings) != len(poses):
-        raise HspError(f"{recordings_dir}: {len(recordings)} recordings for {len(poses)} dataset episodes")
-    rec = read_recording(recordings[episode])
+    path = episode_recordings(dataset_dir, recordings_dir)[episode]
+    rec = read_recording(path)
     P, S = poses[episode], status[episode]
     if len(rec.rgb) != len(P):
-        raise HspError(f"{recordings[episode]}: {len(rec.rgb)} frames, dataset episode {episode} has {len(P)}")
-    if rec.T_world_cam is None:
-        raise HspError(f"{recordings[episode]}: no camera pose in /tf_static; cannot project the poses")
-    gt = matching_ground_truth(recordings[episode], task.names, len(P))
+        raise HspError(f"{path}: {len(rec.rgb)} frames, dataset episode {episode} has {len(P)}")
+    source = episode_sources(dataset_dir)[episode]
+    T_world_cam = source["T_world_cam"] if source["T_world_cam"] is not None else rec.T_world_cam
+    if T_world_cam is None:
+        raise HspError(f"{path}: no camera pose in {dataset_dir} or in /tf_static; cannot project the poses")
+    T_world_cam = np.asarray(T_world_cam, float)  # the table frame parse tracked in
+    gt = matching_ground_truth(path, task.names, len(P)) if source["table_frame"] != "fitted" else None
     truth = None if gt is None else gt.poses
     labels = _labels(labels_file, episode, len(P))
     meshes = [load_mesh(task.mesh(i)) for i in range(len(task.objects))]
     out_dir = Path(out_dir)
     stem = f"episode_{episode:06d}"
     fps = float(meta["fps"])
-    out = {"video": write_overlay(out_dir / f"{stem}.mp4", rec.rgb, meshes, P, S, rec.K, rec.T_world_cam, fps, truth)}
+    out = {"video": write_overlay(out_dir / f"{stem}.mp4", rec.rgb, meshes, P, S, rec.K, T_world_cam, fps, truth)}
     if labels is not None:
         true_labels = None if truth is None else {"tool": gt.tool, "target": gt.target, "waypoint_index": gt.waypoint_index}
         out["timeline"] = write_timeline(out_dir / f"{stem}_timeline.png", task.names, labels, S, true_labels, fps,
                                          f"{task.name}, episode {episode}: pseudo-labels above the demonstrator's annotation")
     else:
         log.warning("no labels for %s (run `hsp label %s` first): timeline skipped", stem, task.name)
-    out["rerun"] = write_rrd(out_dir / f"{stem}.rrd", task.names, meshes, P, rec.rgb, rec.depth, rec.K, rec.T_world_cam,
+    out["rerun"] = write_rrd(out_dir / f"{stem}.rrd", task.names, meshes, P, rec.rgb, rec.depth, rec.K, T_world_cam,
                              labels, truth, rrd_every)
-    log.info("view %s episode %d: read %s, %s; wrote %s in %.1f s", task.name, episode, recordings[episode], dataset_dir,
+    log.info("view %s episode %d: read %s, %s; wrote %s in %.1f s", task.name, episode, path, dataset_dir,
              ", ".join(str(p) for p in out.values()), time.perf_counter() - start)
     return out

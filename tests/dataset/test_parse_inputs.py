@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from hsp.cli import app
 from hsp.dataset.build import RecordingCheck, dataset_rate
-from hsp.dataset.reader import load_episodes
+from hsp.dataset.reader import episode_recordings, episode_sources, load_episodes
 from hsp.errors import HspError
 from hsp.recording.record import RecordConfig, record
 from hsp.recording.writer import CameraRig
@@ -53,7 +53,7 @@ def assert_failed_cleanly(result, tmp_path, message):
     assert result.exit_code == 1, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and message in errors[0], result.output
-    assert "Traceback" not in result.output
+    assert isinstance(result.exception, SystemExit), result.exception  # hsp's own error, not an escaped exception
     assert not (tmp_path / "ds").exists() and not list(tmp_path.glob(".ds*"))  # no dataset, no hidden partial one
 
 
@@ -76,6 +76,25 @@ def test_a_bad_file_among_good_ones(good, tmp_path, name, content, message):
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "reports" / "stacking-1" / "parse.json").read_text())
     assert report["episodes"] == 2 and len(report["skipped"]) == 1 and message in report["skipped"][0]
+
+
+def test_skipped_recordings_do_not_shift_the_episodes(good, tmp_path):
+    """Episodes name the recording they came from: label (and train, view) find each
+    episode's own recording when --skip-bad left one out before it."""
+    d = folder(good, tmp_path, "episode_000000a.mcap", b"")
+    result = parse(d, tmp_path, "--skip-bad")
+    assert result.exit_code == 0, result.output
+    assert "WARNING" in result.output and "codec" not in result.output  # no video, no LeRobot codec line
+    sources = episode_sources(tmp_path / "ds")
+    assert [s["source"] for s in sources] == ["episode_000000.mcap", "episode_000001.mcap"]
+    assert all(s["table_frame"] == "tf_static world" and len(s["T_world_cam"]) == 7 for s in sources)
+    assert episode_recordings(tmp_path / "ds", d) == [d / "episode_000000.mcap", d / "episode_000001.mcap"]
+    result = runner.invoke(app, ["label", "stacking-1", "--dataset", str(tmp_path / "ds"), "--recordings", str(d),
+                                 "--out", str(tmp_path / "labels.parquet"), "--reports", str(tmp_path / "reports")])
+    assert result.exit_code == 0, result.output
+    (d / "episode_000001.mcap").unlink()
+    with pytest.raises(HspError, match="no recording 'episode_000001.mcap', which episode 1 of"):
+        episode_recordings(tmp_path / "ds", d)
 
 
 def test_mismatched_resolutions(good, tmp_path):
@@ -134,3 +153,6 @@ def test_the_dataset_rate_is_the_common_whole_one():
     assert "e2.mcap: recorded at 7.50 fps, 3 other recording(s) at 15 fps" in checks[2].error
     with pytest.raises(HspError, match="e0.mcap: recorded at 7.50 fps; a LeRobot dataset needs a whole number"):
         dataset_rate([RecordingCheck(Path("e0.mcap"), fps=7.5)], 0.05)
+    # more recordings at a rate that is not whole than at one that is: the whole one is the dataset's
+    checks = [RecordingCheck(Path(f"e{k}.mcap"), fps=f) for k, f in enumerate([7.5, 7.5, 7.5, 15.0, 15.0])]
+    assert dataset_rate(checks, 0.05) == 15 and [bool(c.error) for c in checks] == [True, True, True, False, False]

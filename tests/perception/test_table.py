@@ -73,5 +73,18 @@ def test_a_given_camera_pose_wins():
 def test_no_table_is_a_one_line_error():
     rng = np.random.default_rng(0)
     depth = rng.uniform(0.5, 2.0, (CAM.height, CAM.width)).astype(np.float32)
-    with pytest.raises(HspError, match=r"ep.mcap: no table in the first frame .*--camera-pose"):
+    with pytest.raises(HspError, match=r"ep.mcap: no table in the first frames .*--camera-pose"):
         fit_table(depth, CAM.K, TableConfig(), 0, "ep.mcap")
+
+
+def test_a_bad_first_frame_does_not_decide_the_table():
+    """The plane is fitted in the median of the first frames: a first frame of noise (auto-
+    exposure settling, a hand across the view) and holes in the others change nothing."""
+    rng = np.random.default_rng(1)
+    depth = np.repeat(table_depth(EYE)[None], 5, axis=0)
+    depth[0] = rng.uniform(0.3, 2.0, depth[0].shape)
+    depth[1:][rng.random(depth[1:].shape) < 0.3] = 0.0
+    T, how = table_frame(depth, CAM.K, EYE, "world", None)
+    assert how == "tf_static world"
+    with pytest.raises(HspError, match="no table"):
+        table_frame(depth[:1], CAM.K, EYE, "world", None)

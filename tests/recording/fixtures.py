@@ -26,8 +26,10 @@ def frames(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 def write_bag(path: Path, n: int = 10, *, color: bool = True, depth: bool = True, info: bool = True,
               depth_shape: tuple[int, int] = (H, W), color_encoding: str = "rgb8", depth_offset_ns: int = 0,
-              drop_depth: tuple[int, ...] = (), color_topic: str = COLOR_IMAGE, chunk_size: int = 1 << 20) -> tuple[np.ndarray, np.ndarray]:
-    """A bag of ``n`` frames; returns the colour and depth (mm) that went in."""
+              drop_depth: tuple[int, ...] = (), color_topic: str = COLOR_IMAGE, chunk_size: int = 1 << 20,
+              K: np.ndarray = CAM.K, extra_topics: tuple[str, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """A bag of ``n`` frames; returns the colour and depth (mm) that went in. ``extra_topics``
+    carry the colour images too (the driver's infrared streams, say)."""
     rgb, depth_mm = frames(n)
     with open(path, "wb") as f:
         w = Ros2McapWriter(f, chunk_size=chunk_size)  # small chunks make single-chunk damage testable
@@ -36,13 +38,14 @@ def write_bag(path: Path, n: int = 10, *, color: bool = True, depth: bool = True
             header = {"stamp": stamp(ns), "frame_id": "camera_color_optical_frame"}
             if color:
                 img = rgb[t][:, :, ::-1] if color_encoding == "bgr8" else rgb[t]
-                w.write(color_topic, IMAGE, image_msg(header, np.ascontiguousarray(img), color_encoding), ns, t)
+                for topic in (color_topic, *extra_topics):
+                    w.write(topic, IMAGE, image_msg(header, np.ascontiguousarray(img), color_encoding), ns, t)
             if depth and t not in drop_depth:
                 d_header = {"stamp": stamp(ns + depth_offset_ns), "frame_id": "camera_color_optical_frame"}
                 d = depth_mm[t] if depth_shape == (H, W) else np.zeros(depth_shape, np.uint16)
                 w.write(DEPTH_IMAGE, IMAGE, image_msg(d_header, d, "16UC1"), ns + depth_offset_ns, t)
             if info:
-                w.write(COLOR_INFO, CAMERA_INFO, camera_info(CAM, header), ns, t)
+                w.write(COLOR_INFO, CAMERA_INFO, {**camera_info(CAM, header), "k": np.ravel(K).tolist()}, ns, t)
         w.finish()
     return rgb, depth_mm
 
@@ -81,9 +84,11 @@ def write_rosbags_bag(directory: Path, n: int = 6, prefix: str = "/camera/camera
         if compression:
             writer.set_compression(CompressionMode[compression.upper()], CompressionFormat.ZSTD)
         with writer as wr:
-            c_img = wr.add_connection(f"{prefix}/color/image_raw", Image.__msgtype__, typestore=ts)
-            c_dep = wr.add_connection(f"{prefix}/aligned_depth_to_color/image_raw", Image.__msgtype__, typestore=ts)
-            c_inf = wr.add_connection(f"{prefix}/color/camera_info", CameraInfo.__msgtype__, typestore=ts)
+            topics = [(f"{prefix}/color/image_raw", Image), (f"{prefix}/aligned_depth_to_color/image_raw", Image),
+                      (f"{prefix}/color/camera_info", CameraInfo)]
+            order = [0, 1, 2] if k == 0 else [2, 0, 1]  # the second file of a split bag numbers its channels anew
+            conns = {i: wr.add_connection(topics[i][0], topics[i][1].__msgtype__, typestore=ts) for i in order}
+            c_img, c_dep, c_inf = conns[0], conns[1], conns[2]
             if tf and k == 0:
                 TFMessage, Stamped = T["tf2_msgs/msg/TFMessage"], T["geometry_msgs/msg/TransformStamped"]
                 Tf, V3, Q = T["geometry_msgs/msg/Transform"], T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]

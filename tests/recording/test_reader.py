@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hsp.errors import HspError
-from hsp.recording.reader import ReadOptions, read_recording
+from hsp.recording.reader import ReadOptions, ReadReport, _read_messages, find_recordings, read_recording
 from hsp.recording.record import RecordConfig, record
 from hsp.recording.writer import CameraRig
 from hsp.sim.camera import CameraConfig
@@ -77,6 +77,48 @@ def test_no_camera_info_needs_intrinsics(tmp_path):
         read_recording(tmp_path / "i.mcap")
     rec = read_recording(tmp_path / "i.mcap", ReadOptions(intrinsics=(30.0, 30.0, 15.5, 11.5)))
     np.testing.assert_array_equal(rec.K, CAM.K)
+
+
+@pytest.mark.parametrize("K", [np.zeros((3, 3)), np.diag([30.0, 30.0, 1.0])])
+def test_uncalibrated_intrinsics(tmp_path, K):
+    """A CameraInfo of zeros (an uncalibrated camera), or with the principal point at a
+    corner, is an error naming the file; --intrinsics overrides it."""
+    write_bag(tmp_path / "k.mcap", K=K)
+    with pytest.raises(HspError, match=r"k.mcap: intrinsics from /camera/camera/color/camera_info .* of a 32x24 camera"):
+        read_recording(tmp_path / "k.mcap")
+    rec = read_recording(tmp_path / "k.mcap", ReadOptions(intrinsics=(30.0, 30.0, 15.5, 11.5)))
+    np.testing.assert_array_equal(rec.K, CAM.K)
+
+
+def test_only_the_chosen_topics_are_decoded(tmp_path):
+    """The driver records infrared and unaligned depth streams too; only the topics read_recording
+    picks are decoded (each stream would hold the whole recording in memory again)."""
+    infrared = ("/camera/camera/infra1/image_rect_raw", "/camera/camera/infra2/image_rect_raw")
+    rgb, _ = write_bag(tmp_path / "m.mcap", n=4, extra_topics=infrared)
+    np.testing.assert_array_equal(read_recording(tmp_path / "m.mcap").rgb, rgb)
+    write_rosbags_bag(tmp_path / "bag", n=4)
+    for path in (tmp_path / "m.mcap", tmp_path / "bag"):
+        seen = []
+        bag = _read_messages(path, ReadReport(), lambda types: seen.append(sorted(types)) or {t for t in types if "info" in t})
+        assert len(seen[0]) >= 3 and {topic for topic, _, _ in bag.messages} == {"/camera/camera/color/camera_info"}
+
+
+def test_what_parse_is_pointed_at(tmp_path):
+    """A folder lists its bags, bare files and bags cut short (which the check then reports);
+    one file of a bag is refused, the bag is named instead."""
+    write_rosbags_bag(tmp_path / "d" / "bag_a", n=4, split=True)
+    write_bag(tmp_path / "d" / "b.mcap", n=4)
+    cut = tmp_path / "d" / "bag_c"
+    write_rosbags_bag(cut, n=4)
+    (cut / "metadata.yaml").unlink()
+    (tmp_path / "d" / "notes.txt").write_text("")
+    assert [p.name for p in find_recordings(tmp_path / "d")] == ["b.mcap", "bag_a", "bag_c"]
+    with pytest.raises(HspError, match="bag_c: a directory without metadata.yaml.*ros2 bag reindex"):
+        read_recording(cut)
+    part = next((tmp_path / "d" / "bag_a").glob("*.mcap"))
+    with pytest.raises(HspError, match=f"{part.name}: one file of the rosbag2 bag .*bag_a; name the bag directory"):
+        find_recordings(part)
+    assert find_recordings(tmp_path / "d" / "bag_a") == [tmp_path / "d" / "bag_a"]
 
 
 def test_unaligned_depth_resolution(tmp_path):
