@@ -26,6 +26,16 @@ from hsp.geometry import inverse, pose_from_matrix, pose_to_matrix
 from hsp.perception.pointcloud import camera_points
 
 
+GROUND_TRUTH_FRAME = "ground truth"
+"""The frame of poses taken from a recording's ground truth (``hsp parse --poses-from ground-truth``)."""
+
+
+def in_recorded_world(how: str) -> bool:
+    """Whether poses in a table frame found ``how`` are in the recording's own world, that of
+    its ground truth: a fitted or given frame is not, so it is not scored against it."""
+    return how.startswith("tf_static") or how == GROUND_TRUTH_FRAME
+
+
 @dataclass(frozen=True)
 class TableConfig:
     inlier_m: float = 0.005
