@@ -271,8 +271,8 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
         fps = int(first.metadata.get("fps", 0)) or round(frame_rate(first.stamps_ns)[0])
         counts = write_dataset(task, _ground_truth_episodes(task, recordings, recordings_dir, first, fps), out_dir, fps)
     else:
-        counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg, seed, table,
-                                                      skip_bad, start)
+        counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg,
+                                                      seed, table, skip_bad, start)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)

@@ -122,7 +122,7 @@ def plane_offset(plane: TablePlane, T_world_cam: np.ndarray) -> tuple[float, flo
 
 def table_frame(depth: np.ndarray, K: np.ndarray, T_tf: np.ndarray | None, tf_root: str, given: np.ndarray | None,
                 cfg: TableConfig = TableConfig(), seed: int = 0, source: str = "depth") -> tuple[np.ndarray, str]:
-    """``T_world_cam (7,)`` from the first frames ``depth (N, H, W)`` and how it was found (see the module docstring)."""
+    """``T_world_cam (7,)`` from the first frames ``depth (N, H, W)`` and how it was found (module docstring)."""
     if given is not None:
         return np.asarray(given, float), "given"
     plane = fit_table(depth, K, cfg, seed, source)

@@ -360,8 +360,9 @@ def _check_intrinsics(K: np.ndarray, shape: tuple[int, int], path: Path, source:
     """A pinhole camera of an image ``shape (H, W)``: focal lengths > 0, principal point inside."""
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     if not (np.all(np.isfinite(K)) and fx > 0 and fy > 0 and 0 < cx < shape[1] and 0 < cy < shape[0]):
-        raise HspError(f"{path}: intrinsics from {source} (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}) are not those of "
-                       f"a {shape[1]}x{shape[0]} camera; is the camera calibrated? (--intrinsics fx,fy,cx,cy overrides)")
+        raise HspError(f"{path}: intrinsics from {source} (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}) are not "
+                       f"those of a {shape[1]}x{shape[0]} camera; is the camera calibrated? "
+                       "(--intrinsics fx,fy,cx,cy overrides)")
 
 
 def _tf_pose(tf: object) -> np.ndarray:
@@ -396,12 +397,14 @@ def _topics(types: dict[str, str], options: ReadOptions, path: Path, report: Rea
     if color is None or depth is None:
         images = sorted(t for t, ty in types.items() if ty == IMAGE_SCHEMA)
         missing = "colour" if color is None else "depth"
-        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; all topics: {sorted(types)}"
+        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; "
+                       f"all topics: {sorted(types)}"
                        " (name them with --color-topic/--depth-topic)")
     if "aligned_depth_to_color" not in depth and options.depth_topic is None:
         if not any("aligned_depth_to_color" in t for t in types):
             report.warn(f"{path}: depth topic {depth} is not the aligned one; it must be registered to colour")
-    info = _pick(types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path, report)
+    info = _pick(types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path,
+                 report)
     return {"color": color, "depth": depth, "info": info}
 
 
