@@ -192,6 +192,7 @@ def train(demos: Demonstrations, task: Task, make_env: Callable[[], gym.Env], cf
     """PPO on D's reward in the environments of ``make_env``, D against ``demos``; the model
     and a report."""
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     torch.manual_seed(seed)
@@ -208,6 +209,7 @@ def train(demos: Demonstrations, task: Task, make_env: Callable[[], gym.Env], cf
     ppo = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.epochs,
               learning_rate=cfg.learning_rate, gamma=cfg.gamma, seed=seed, device="cpu", verbose=0,
               policy_kwargs={"net_arch": [cfg.hidden] * cfg.layers, "log_std_init": cfg.log_std_init})
+    ppo.set_logger(Logger(None, []))  # SB3's default logger makes an empty /tmp/SB3-DATE directory per learn()
     venv.seed(int(np.random.SeedSequence([seed, TRAIN_STREAM]).generate_state(1)[0]))  # after PPO's own seeding
     history: list[dict] = []
     start = time.perf_counter()

@@ -26,7 +26,7 @@ from hsp.errors import HspError
 from hsp.parallel import captured_warnings, one_omp_thread, pin_to_one_core
 from hsp.perception.episode import object_models, track_recording
 from hsp.perception.metrics import auc, episode_errors, match_identical
-from hsp.perception.table import TableConfig, table_frame
+from hsp.perception.table import GROUND_TRUTH_FRAME, TableConfig, in_recorded_world, table_frame
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
 from hsp.recording.reader import ReadOptions, find_recordings, read_recording, recording_name
@@ -47,7 +47,7 @@ def _ground_truth_episodes(task: Task, recordings: list[Path], root: Path, first
         if int(gt.metadata.get("fps", fps)) != fps:
             raise HspError(f"{path}: recorded at {gt.metadata['fps']} fps, the other recordings at {fps}")
         yield EpisodePoses(recording_name(path, root), gt.poses, np.full(gt.poses.shape[:2], TrackStatus.OK, np.int64),
-                           table_frame="ground truth")
+                           {"table_frame": GROUND_TRUTH_FRAME})
 
 
 @dataclass(frozen=True)
@@ -61,10 +61,8 @@ class TrackJob:
     cfg: TrackerConfig
     seed: int
     table: TableConfig = TableConfig()
-    T_world_cam: np.ndarray | None = None
-    """The table frame found by :func:`check_recording` (tracking jobs only) ..."""
-    table_frame: str = ""
-    """... and how: a fitted frame is not the recorded truth's world, so it is not scored against it."""
+    check: RecordingCheck | None = None
+    """What :func:`check_recording` found (tracking jobs only): the table frame to track in."""
 
 
 @dataclass
@@ -85,6 +83,16 @@ class RecordingCheck:
     """Corrupt MCAP chunks and undecodable messages left out."""
     truncated: bool = False
     warnings: list[str] = field(default_factory=list)
+    intrinsics: tuple[float, ...] = ()
+    """(fx, fy, cx, cy) as read (or given) ..."""
+    topics: dict[str, str] = field(default_factory=dict)
+    """... and the topics: what reading the recording again the same way takes (``hsp view``)."""
+
+    def episode_info(self) -> dict:
+        """What the dataset keeps of this check for its episode (:data:`~hsp.dataset.features.EPISODE_SOURCES`)."""
+        return {"table_frame": self.table_frame, "T_world_cam": [float(v) for v in self.T_world_cam],
+                "fps": self.fps, "dropped_frames": self.dropped, "intrinsics": list(self.intrinsics),
+                "topics": self.topics}
 
 
 def frame_rate(stamps_ns: np.ndarray) -> tuple[float, int]:
@@ -108,8 +116,10 @@ def check_recording(job: TrackJob) -> RecordingCheck:
         except Exception as e:  # noqa: BLE001 - whatever else a damaged file raises is a fault of that file
             error = f"{job.path}: cannot be read ({type(e).__name__}: {e})".splitlines()[0]
             return RecordingCheck(job.path, error=error, warnings=warnings)
+    K = rec.K
     return RecordingCheck(job.path, "", len(rec.stamps_ns), fps, dropped, T, how,
-                          rec.report.skipped_chunks + rec.report.skipped_messages, rec.report.truncated, warnings)
+                          rec.report.skipped_chunks + rec.report.skipped_messages, rec.report.truncated, warnings,
+                          (K[0, 0], K[1, 1], K[0, 2], K[1, 2]), rec.topics)
 
 
 @dataclass
@@ -134,18 +144,18 @@ def _track_one(job: TrackJob) -> TrackOutcome:
     its ground truth if any."""
     task = load_task(job.task, job.pipeline_dir)
     with captured_warnings():  # the reader's, already reported by the check
-        rec = replace(read_recording(job.path, job.options), T_world_cam=job.T_world_cam)
+        rec = replace(read_recording(job.path, job.options), T_world_cam=job.check.T_world_cam)
     models = object_models(task, job.cfg, job.seed)
     tracked = track_recording(task, rec, models, job.cfg)
     frames = len(rec.rgb)
     del rec
     errors = None
-    gt = matching_ground_truth(job.path, task.names, frames) if job.table_frame != "fitted" else None
+    gt = matching_ground_truth(job.path, task.names, frames) if in_recorded_world(job.check.table_frame) else None
     if gt is not None:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
         order = match_identical(identical_groups(task), tracked.poses, gt.poses)
         errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses[:, order], gt.poses)
-    episode = EpisodePoses(job.name, tracked.poses, tracked.status, job.T_world_cam, job.table_frame)
+    episode = EpisodePoses(job.name, tracked.poses, tracked.status, job.check.episode_info())
     return TrackOutcome(episode, frames, tracked.seconds, errors)
 
 
@@ -222,16 +232,20 @@ def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall
     return report
 
 
+def _near(fps: float, rate: int, tolerance: float) -> bool:
+    return rate > 0 and abs(fps - rate) <= tolerance * rate
+
+
 def dataset_rate(checks: list[RecordingCheck], tolerance: float) -> int:
     """The dataset's frame rate: the most common among the recordings' rates that are whole
     numbers (within ``tolerance``, a fraction), as LeRobot stores a whole number of frames per
     second; the recordings further than that from it are marked bad."""
-    rates = [round(c.fps) for c in checks if round(c.fps) > 0 and abs(c.fps - round(c.fps)) <= tolerance * round(c.fps)]
+    rates = [round(c.fps) for c in checks if _near(c.fps, round(c.fps), tolerance)]
     if not rates:
         raise HspError(f"{checks[0].path}: recorded at {checks[0].fps:.2f} fps; a LeRobot dataset needs a whole number "
                        "of frames per second (record at 6, 15, 30 or 60 fps)")
     fps = max(set(rates), key=lambda r: (rates.count(r), r))
-    near = [c for c in checks if abs(c.fps - fps) <= tolerance * fps]
+    near = [c for c in checks if _near(c.fps, fps, tolerance)]
     for c in checks:
         if c not in near:
             c.error = (f"{c.path}: recorded at {c.fps:.2f} fps, {len(near)} other recording(s) at {fps} fps; "
@@ -257,8 +271,8 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
         fps = int(first.metadata.get("fps", 0)) or round(frame_rate(first.stamps_ns)[0])
         counts = write_dataset(task, _ground_truth_episodes(task, recordings, recordings_dir, first, fps), out_dir, fps)
     else:
-        counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg, seed, table,
-                                                      skip_bad, start)
+        counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg,
+                                                      seed, table, skip_bad, start)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)
@@ -286,8 +300,7 @@ def _parse_tracked(task: Task, recordings: list[Path], root: Path, out_dir: Path
         log.info("checked %d recordings: %d good at %d fps (%d frames dropped), %d skipped; table frames: %s",
                  len(checks), len(good), fps, sum(c.dropped for c in good), len(bad),
                  dict(Counter(c.table_frame for c in good)))
-        jobs = [replace(j, T_world_cam=c.T_world_cam, table_frame=c.table_frame)
-                for j, c in zip(jobs, checks) if not c.error]
+        jobs = [replace(j, check=c) for j, c in zip(jobs, checks) if not c.error]
         outcomes: list[TrackOutcome] = []
         counts = write_dataset(task, _tracked_episodes(jobs, pool, outcomes), out_dir, fps)
     tracking = tracking_report(task, outcomes, workers, time.perf_counter() - start)

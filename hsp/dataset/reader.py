@@ -47,28 +47,45 @@ def load_episodes(dataset_dir: Path, task_name: str,
 
 
 def episode_sources(dataset_dir: Path) -> list[dict]:
-    """Per episode: ``source`` (the recording's name), ``table_frame`` and ``T_world_cam``
-    (7 numbers or ``None``), as ``hsp parse`` wrote them."""
+    """Per episode, as ``hsp parse`` wrote it: ``source`` (the recording's name), ``table_frame``
+    and, for tracked poses, ``T_world_cam`` (7), ``intrinsics``, ``topics``, ``fps`` and
+    ``dropped_frames``."""
     path = Path(dataset_dir) / EPISODE_SOURCES
     if not path.is_file():
         raise HspError(f"{dataset_dir}: no {EPISODE_SOURCES} (written by an older hsp); re-run `hsp parse`")
     try:
-        return [json.loads(line) for line in path.read_text().splitlines()]
-    except json.JSONDecodeError as e:
-        raise HspError(f"{path}: not JSON lines ({e})") from None
+        sources = [json.loads(line) for line in path.read_text().splitlines()]
+        episodes = json.loads((Path(dataset_dir) / "meta" / "info.json").read_text())["total_episodes"]
+    except (json.JSONDecodeError, KeyError, OSError) as e:
+        raise HspError(f"{path}: cannot be read ({e})") from None
+    if [s.get("episode_index") for s in sources] != list(range(episodes)):
+        raise HspError(f"{path}: {len(sources)} episode sources for the dataset's {episodes} episodes "
+                       "(edited since `hsp parse`?); re-run `hsp parse`")
+    return sources
 
 
-def episode_recordings(dataset_dir: Path, recordings: Path) -> list[Path]:
+def episode_recordings(dataset_dir: Path, recordings: Path, episodes: list[int] | None = None) -> list[Path]:
     """The recording in ``recordings`` (a folder, a bag or a file, as ``hsp parse`` was given
-    it) that each episode of ``dataset_dir`` was parsed from, matched by name: recordings that
-    ``--skip-bad`` left out do not shift the others."""
+    it) that each episode of ``dataset_dir`` (or of ``episodes``) was parsed from, matched by
+    name: recordings that ``--skip-bad`` left out do not shift the others."""
     from hsp.recording.reader import find_recordings, recording_name
 
     found = {recording_name(p, recordings): p for p in find_recordings(recordings)}
+    sources = episode_sources(dataset_dir)
     out = []
-    for info in episode_sources(dataset_dir):
+    for info in sources if episodes is None else [sources[e] for e in episodes]:
         if info["source"] not in found:
             raise HspError(f"{recordings}: no recording {info['source']!r}, which episode {info['episode_index']} of "
                            f"{dataset_dir} was parsed from ({len(found)} found)")
         out.append(found[info["source"]])
     return out
+
+
+def read_options(source: dict):
+    """:class:`~hsp.recording.reader.ReadOptions` that read an episode's recording again as
+    ``hsp parse`` read it: its topics and intrinsics (an entry of :func:`episode_sources`)."""
+    from hsp.recording.reader import ReadOptions
+
+    topics = source.get("topics", {})
+    intrinsics = tuple(source["intrinsics"]) if source.get("intrinsics") else None
+    return ReadOptions(topics.get("color"), topics.get("depth"), topics.get("info") or None, intrinsics)

@@ -11,7 +11,7 @@ import contextlib
 import json
 import os
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,13 +33,9 @@ class EpisodePoses:
     """The recording's name within the recordings folder (:func:`hsp.recording.reader.recording_name`)."""
     poses: np.ndarray
     status: np.ndarray
-    T_world_cam: np.ndarray | None = None
-    """The camera pose (7,) in the table frame the poses are in, and how that frame was found."""
-    table_frame: str = ""
-
-    def info(self, index: int) -> dict:
-        T = None if self.T_world_cam is None else [float(v) for v in self.T_world_cam]
-        return {"episode_index": index, "source": self.source, "table_frame": self.table_frame, "T_world_cam": T}
+    info: dict = field(default_factory=dict)
+    """JSON-ready: the table frame the poses are in (``table_frame``, ``T_world_cam``) and how
+    the recording was read (:meth:`hsp.dataset.build.RecordingCheck.episode_info`)."""
 
 
 def actions(ee: np.ndarray, status: np.ndarray) -> np.ndarray:
@@ -89,7 +85,7 @@ def write_dataset(task: Task, episodes: Iterable[EpisodePoses], out_dir: Path, f
             lengths, infos = [], []
             for ep in episodes:
                 lengths.append(_add_episode(ds, task, ep))
-                infos.append(ep.info(len(infos)))
+                infos.append({"episode_index": len(infos), "source": ep.source, **ep.info})
             if not lengths:
                 raise HspError("no episodes to write")
         except BaseException:

@@ -26,6 +26,16 @@ from hsp.geometry import inverse, pose_from_matrix, pose_to_matrix
 from hsp.perception.pointcloud import camera_points
 
 
+GROUND_TRUTH_FRAME = "ground truth"
+"""The frame of poses taken from a recording's ground truth (``hsp parse --poses-from ground-truth``)."""
+
+
+def in_recorded_world(how: str) -> bool:
+    """Whether poses in a table frame found ``how`` are in the recording's own world, that of
+    its ground truth: a fitted or given frame is not, so it is not scored against it."""
+    return how.startswith("tf_static") or how == GROUND_TRUTH_FRAME
+
+
 @dataclass(frozen=True)
 class TableConfig:
     inlier_m: float = 0.005
@@ -112,7 +122,7 @@ def plane_offset(plane: TablePlane, T_world_cam: np.ndarray) -> tuple[float, flo
 
 def table_frame(depth: np.ndarray, K: np.ndarray, T_tf: np.ndarray | None, tf_root: str, given: np.ndarray | None,
                 cfg: TableConfig = TableConfig(), seed: int = 0, source: str = "depth") -> tuple[np.ndarray, str]:
-    """``T_world_cam (7,)`` from the first frames ``depth (N, H, W)`` and how it was found (see the module docstring)."""
+    """``T_world_cam (7,)`` from the first frames ``depth (N, H, W)`` and how it was found (module docstring)."""
     if given is not None:
         return np.asarray(given, float), "given"
     plane = fit_table(depth, K, cfg, seed, source)

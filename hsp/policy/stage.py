@@ -95,7 +95,7 @@ def train_task(task: Task, dataset_dir: Path, out_dir: Path, cfg: TrainConfig, s
     if labels_file is not None:
         labels = read_labels(labels_file, [len(p) for p in poses], len(task.objects))
     else:
-        labels = annotation_labels(task, episode_recordings(dataset_dir, recordings_dir), poses)  # type: ignore[arg-type]
+        labels = annotation_labels(task, episode_recordings(dataset_dir, recordings_dir), poses)  # type: ignore
     source = labels_file or recordings_dir
     steps = labelled_steps(task, world, status, labels, cfg)
     classes, n_classes = semantic_classes(task)

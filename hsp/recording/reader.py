@@ -18,6 +18,7 @@ Ground-truth topics (``/hsp/ground_truth/*``) are never read here.
 from __future__ import annotations
 
 import logging
+import re
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -109,13 +110,15 @@ def recording_name(path: Path, root: Path) -> str:
     """How a dataset names the recording ``path`` found in ``root`` (:func:`find_recordings`):
     its path relative to the folder, or its own name when ``root`` is the recording."""
     path, root = Path(path), Path(root)
-    return path.name if path == root else path.relative_to(root).as_posix()
+    return path.resolve().name if path == root else path.relative_to(root).as_posix()
 
 
-def _looks_like_bag(path: Path) -> bool:
-    """A rosbag2 directory, or one cut short before ``metadata.yaml`` was written (which the
-    check then reports, rather than leave it out unnoticed)."""
-    return path.is_dir() and (is_bag_directory(path) or any(path.glob("*.db3")) or any(path.glob("*.mcap")))
+def _cut_short_bag(path: Path) -> bool:
+    """A rosbag2 directory cut short before ``metadata.yaml`` was written: files named as
+    rosbag2 writers name them (``DIR_0.db3``, ``DIR_0.mcap``, ``DIR.mcap.zstd``), no metadata."""
+    pattern = re.compile(rf"{re.escape(path.name)}(_\d+)?\.(db3|mcap)(\.zstd)?")
+    return (path.is_dir() and not is_bag_directory(path)
+            and any(pattern.fullmatch(f.name) for f in path.iterdir()))
 
 
 def find_recordings(path: Path) -> list[Path]:
@@ -129,9 +132,10 @@ def find_recordings(path: Path) -> list[Path]:
             raise HspError(f"{path}: one file of the rosbag2 bag {path.parent}; name the bag directory "
                            "(a split or compressed bag is read whole)")
         return [path]
-    if is_bag_directory(path):
-        return [path]
-    found = sorted(p for p in path.iterdir() if (p.is_file() and p.suffix in RECORDING_SUFFIXES) or _looks_like_bag(p))
+    if is_bag_directory(path) or _cut_short_bag(path):
+        return [path]  # the check says what to do with one cut short
+    found = sorted(p for p in path.iterdir() if (p.is_file() and p.suffix in RECORDING_SUFFIXES)
+                   or is_bag_directory(p) or _cut_short_bag(p))  # the check reports those cut short
     if found:
         return found
     if any(path.glob("*.db3")):
@@ -212,7 +216,6 @@ def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_mes
     """MCAP files (a bare ``.mcap`` or the files of a rosbag2 MCAP bag) with hsp's own scan,
     which keeps what survives damage. ``compressed_messages``: rosbag2's per-message zstd."""
     out = _Messages({}, [])
-    decoders = {}
     unzip = zstandard.ZstdDecompressor()
     bad = 0
     scanned = []
@@ -222,21 +225,21 @@ def _read_mcap(files: list[Path], path: Path, report: ReadReport, compressed_mes
         out.types |= {ch.topic: schemas[ch.schema_id].name for ch in channels.values() if ch.schema_id in schemas}
         scanned.append((f, schemas, channels, messages))
     wanted = choose(out.types)
-    for f, schemas, channels, messages in scanned:
-        factory = DecoderFactory()  # it caches decoders by schema id, which each file of a split bag numbers anew
+    while scanned:
+        f, schemas, channels, messages = scanned.pop(0)  # each file's raw messages go once decoded
+        factory, decoders = DecoderFactory(), {}  # it caches by schema id, which each file of a split bag numbers anew
         for m in messages:
             ch = channels.get(m.channel_id)
             if ch is None or ch.topic not in wanted or ch.schema_id not in schemas:
                 continue
             schema = schemas[ch.schema_id]
-            key = (f, ch.id)
-            if key not in decoders:
-                decoders[key] = factory.decoder_for(ch.message_encoding, schema)
-                if decoders[key] is None:
+            if ch.id not in decoders:
+                decoders[ch.id] = factory.decoder_for(ch.message_encoding, schema)
+                if decoders[ch.id] is None:
                     raise HspError(f"{path}: cannot decode {ch.topic} ({ch.message_encoding}, {schema.encoding})")
             try:
                 data = unzip.decompress(m.data) if compressed_messages else m.data
-                out.messages.append((ch.topic, m.log_time, decoders[key](data)))
+                out.messages.append((ch.topic, m.log_time, decoders[ch.id](data)))
             except (zstandard.ZstdError, ValueError, IndexError, EOFError, struct.error) as e:
                 bad += 1
                 if bad == 1:
@@ -357,8 +360,9 @@ def _check_intrinsics(K: np.ndarray, shape: tuple[int, int], path: Path, source:
     """A pinhole camera of an image ``shape (H, W)``: focal lengths > 0, principal point inside."""
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     if not (np.all(np.isfinite(K)) and fx > 0 and fy > 0 and 0 < cx < shape[1] and 0 < cy < shape[0]):
-        raise HspError(f"{path}: intrinsics from {source} (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}) are not those of "
-                       f"a {shape[1]}x{shape[0]} camera; is the camera calibrated? (--intrinsics fx,fy,cx,cy overrides)")
+        raise HspError(f"{path}: intrinsics from {source} (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g}) are not "
+                       f"those of a {shape[1]}x{shape[0]} camera; is the camera calibrated? "
+                       "(--intrinsics fx,fy,cx,cy overrides)")
 
 
 def _tf_pose(tf: object) -> np.ndarray:
@@ -393,12 +397,14 @@ def _topics(types: dict[str, str], options: ReadOptions, path: Path, report: Rea
     if color is None or depth is None:
         images = sorted(t for t, ty in types.items() if ty == IMAGE_SCHEMA)
         missing = "colour" if color is None else "depth"
-        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; all topics: {sorted(types)}"
+        raise HspError(f"{path}: no {missing} image topic; Image topics: {images or 'none'}; "
+                       f"all topics: {sorted(types)}"
                        " (name them with --color-topic/--depth-topic)")
     if "aligned_depth_to_color" not in depth and options.depth_topic is None:
         if not any("aligned_depth_to_color" in t for t in types):
             report.warn(f"{path}: depth topic {depth} is not the aligned one; it must be registered to colour")
-    info = _pick(types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path, report)
+    info = _pick(types, INFO_SCHEMA, ["/color/camera_info", "camera_info"], options.info_topic, "camera info", path,
+                 report)
     return {"color": color, "depth": depth, "info": info}
 
 

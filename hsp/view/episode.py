@@ -8,8 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hsp.dataset.reader import episode_recordings, episode_sources, load_episodes
+from hsp.dataset.reader import episode_recordings, episode_sources, load_episodes, read_options
 from hsp.errors import HspError
+from hsp.perception.table import in_recorded_world
 from hsp.recording.ground_truth import matching_ground_truth
 from hsp.recording.reader import read_recording
 from hsp.sim.render import load_mesh
@@ -42,17 +43,16 @@ def view_episode(task: Task, episode: int, recordings_dir: Path, dataset_dir: Pa
     poses, status, meta = load_episodes(dataset_dir, task.name, task.names)
     if not 0 <= episode < len(poses):
         raise HspError(f"{dataset_dir}: no episode {episode} (the dataset has 0–{len(poses) - 1})")
-    path = episode_recordings(dataset_dir, recordings_dir)[episode]
-    rec = read_recording(path)
+    source, (path,) = episode_sources(dataset_dir)[episode], episode_recordings(dataset_dir, recordings_dir, [episode])
+    rec = read_recording(path, read_options(source))
     P, S = poses[episode], status[episode]
     if len(rec.rgb) != len(P):
         raise HspError(f"{path}: {len(rec.rgb)} frames, dataset episode {episode} has {len(P)}")
-    source = episode_sources(dataset_dir)[episode]
-    T_world_cam = source["T_world_cam"] if source["T_world_cam"] is not None else rec.T_world_cam
+    T_world_cam = source.get("T_world_cam") or rec.T_world_cam  # the table frame parse tracked in
     if T_world_cam is None:
-        raise HspError(f"{path}: no camera pose in {dataset_dir} or in /tf_static; cannot project the poses")
-    T_world_cam = np.asarray(T_world_cam, float)  # the table frame parse tracked in
-    gt = matching_ground_truth(path, task.names, len(P)) if source["table_frame"] != "fitted" else None
+        raise HspError(f"{path}: no camera pose in /tf_static; cannot project the poses")
+    T_world_cam = np.asarray(T_world_cam, float)
+    gt = matching_ground_truth(path, task.names, len(P)) if in_recorded_world(source["table_frame"]) else None
     truth = None if gt is None else gt.poses
     labels = _labels(labels_file, episode, len(P))
     meshes = [load_mesh(task.mesh(i)) for i in range(len(task.objects))]

@@ -5,7 +5,9 @@ The toy is bc's reach straight down onto the block (the hand starts above it at 
 height): on bc's reach to anywhere on the table GAIL succeeded in 0.05 of 20 layouts after
 10^5 steps, too many for a test."""
 
+import tempfile
 from dataclasses import replace
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -67,15 +69,21 @@ class ToyReach(gym.Env):
 
 
 @pytest.fixture(scope="module")
-def trained(tasks):
+def trained(tasks, tmp_path_factory):
     task = tasks["stacking-1"]
+
     demos = toy_demonstrations(task, 100, seed=0, layout=above_block)
     cfg = gail.GailConfig(timesteps=30_000, envs=4, processes=False, n_steps=256, batch_size=256, epochs=10,
                           learning_rate=1e-3, hidden=64, log_std_init=-1.0, disc_updates=50, disc_batch=256,
                           disc_learning_rate=3e-3)
     untrained, _ = gail.train(demos, task, lambda: ToyReach(task), replace(cfg, timesteps=1, n_steps=8, batch_size=8),
                               seed=0)
-    model, report = gail.train(demos, task, lambda: ToyReach(task), cfg, seed=0)
+    scratch, tempfile.tempdir = tempfile.tempdir, str(tmp_path_factory.mktemp("tmp"))  # where SB3 would log
+    try:
+        model, report = gail.train(demos, task, lambda: ToyReach(task), cfg, seed=0)
+        assert list(Path(tempfile.gettempdir()).iterdir()) == []  # no SB3-DATE log directory per training
+    finally:
+        tempfile.tempdir = scratch
     return task, cfg, untrained, model, report
 
 

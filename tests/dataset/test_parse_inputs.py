@@ -53,6 +53,7 @@ def assert_failed_cleanly(result, tmp_path, message):
     assert result.exit_code == 1, result.output
     errors = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and message in errors[0], result.output
+    assert "Traceback" not in result.output
     assert isinstance(result.exception, SystemExit), result.exception  # hsp's own error, not an escaped exception
     assert not (tmp_path / "ds").exists() and not list(tmp_path.glob(".ds*"))  # no dataset, no hidden partial one
 
@@ -88,13 +89,30 @@ def test_skipped_recordings_do_not_shift_the_episodes(good, tmp_path):
     sources = episode_sources(tmp_path / "ds")
     assert [s["source"] for s in sources] == ["episode_000000.mcap", "episode_000001.mcap"]
     assert all(s["table_frame"] == "tf_static world" and len(s["T_world_cam"]) == 7 for s in sources)
+    assert sources[0]["fps"] == pytest.approx(5.0) and sources[0]["intrinsics"] == list(RIG.camera.K[[0, 1, 0, 1], [0, 1, 2, 2]])
     assert episode_recordings(tmp_path / "ds", d) == [d / "episode_000000.mcap", d / "episode_000001.mcap"]
     result = runner.invoke(app, ["label", "stacking-1", "--dataset", str(tmp_path / "ds"), "--recordings", str(d),
                                  "--out", str(tmp_path / "labels.parquet"), "--reports", str(tmp_path / "reports")])
     assert result.exit_code == 0, result.output
+    assert "tool_accuracy" in json.loads((tmp_path / "reports" / "stacking-1" / "labels.json").read_text())  # scored
+    result = runner.invoke(app, ["view", "stacking-1", "--episode", "1", "--recordings", str(d), "--dataset",
+                                 str(tmp_path / "ds"), "--labels", str(tmp_path / "labels.parquet"), "--out", str(tmp_path / "view")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "view" / "episode_000001.mp4").is_file()
     (d / "episode_000001.mcap").unlink()
     with pytest.raises(HspError, match="no recording 'episode_000001.mcap', which episode 1 of"):
         episode_recordings(tmp_path / "ds", d)
+    lines = (tmp_path / "ds" / "meta" / "hsp_episodes.jsonl").read_text().splitlines()
+    (tmp_path / "ds" / "meta" / "hsp_episodes.jsonl").write_text(lines[0] + "\n")  # one episode's source lost
+    with pytest.raises(HspError, match="1 episode sources for the dataset's 2 episodes"):
+        episode_sources(tmp_path / "ds")
+
+
+def test_a_bag_cut_short_among_good_recordings(good, tmp_path):
+    d = folder(good, tmp_path)
+    (d / "bag_c").mkdir()
+    shutil.copy(good / "five" / "episode_000000.mcap", d / "bag_c" / "bag_c_0.mcap")  # metadata.yaml never written
+    assert_failed_cleanly(parse(d, tmp_path), tmp_path, "bag_c: a directory without metadata.yaml")
 
 
 def test_mismatched_resolutions(good, tmp_path):

@@ -104,15 +104,18 @@ def test_only_the_chosen_topics_are_decoded(tmp_path):
 
 
 def test_what_parse_is_pointed_at(tmp_path):
-    """A folder lists its bags, bare files and bags cut short (which the check then reports);
-    one file of a bag is refused, the bag is named instead."""
+    """A folder lists its bags, bare files and bags cut short (which the check then reports),
+    not a sub-folder of other files; one file of a bag is refused, the bag is named instead."""
     write_rosbags_bag(tmp_path / "d" / "bag_a", n=4, split=True)
     write_bag(tmp_path / "d" / "b.mcap", n=4)
     cut = tmp_path / "d" / "bag_c"
     write_rosbags_bag(cut, n=4)
     (cut / "metadata.yaml").unlink()
     (tmp_path / "d" / "notes.txt").write_text("")
+    (tmp_path / "d" / "old").mkdir()
+    write_bag(tmp_path / "d" / "old" / "episode_000000.mcap", n=4)
     assert [p.name for p in find_recordings(tmp_path / "d")] == ["b.mcap", "bag_a", "bag_c"]
+    assert find_recordings(cut) == [cut]  # named directly: one recording, not its files
     with pytest.raises(HspError, match="bag_c: a directory without metadata.yaml.*ros2 bag reindex"):
         read_recording(cut)
     part = next((tmp_path / "d" / "bag_a").glob("*.mcap"))
