@@ -71,7 +71,6 @@ class ToyReach(gym.Env):
 @pytest.fixture(scope="module")
 def trained(tasks, tmp_path_factory):
     task = tasks["stacking-1"]
-
     demos = toy_demonstrations(task, 100, seed=0, layout=above_block)
     cfg = gail.GailConfig(timesteps=30_000, envs=4, processes=False, n_steps=256, batch_size=256, epochs=10,
                           learning_rate=1e-3, hidden=64, log_std_init=-1.0, disc_updates=50, disc_batch=256,
