@@ -430,15 +430,18 @@ class FrameTracker:
         return _explained(self.models[i], pose, rgb, depth, self.K, self.T_world_cam, self.cfg)
 
     def _look_again(self, i: int, pred: np.ndarray, pose_t: np.ndarray, status_t: np.ndarray, pts: np.ndarray,
-                    cols: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
+                    cols: np.ndarray, owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
                     share: float) -> tuple[np.ndarray, float, bool, float] | None:
         """Moving object ``i``, lost or not explained at its prediction (``share``), searched
         for (:func:`_search`) from its grip on the end-effector if it is carried, its last pose
         moved on by the whole of its last motion, its last pose, and its colours' centre near
         the prediction: pose, fit cost, whether it is a correction (the grip), not motion, and
         its support."""
-        starts = [predict(self.prev[i:i + 1], self.dx[i:i + 1], self.drot[i:i + 1], 1.0)[0], self.prev[i]]
-        centre = colour_centre(self.models[i], pts, cols, pred[i], self.models[i].radius + self.cfg.search_m, self.cfg)
+        ahead = 1.0 + self.lost_for[i]  # frames since its last pose to move on from
+        starts = [predict(self.prev[i:i + 1], ahead * self.dx[i:i + 1], ahead * self.drot[i:i + 1], 1.0)[0], self.prev[i]]
+        reach = self.models[i].radius + self.cfg.search_m * (1 + self.lost_for[i])  # further for each frame it was not found
+        free = (owner < 0) | (owner == i)  # not another object's
+        centre = colour_centre(self.models[i], pts[free], cols[free], pred[i], reach, self.cfg)
         if centre is not None:
             starts.append(centre)
         carried = i > 0 and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0])
@@ -458,6 +461,7 @@ class FrameTracker:
         status_t = np.full(n, TrackStatus.OK, np.int64)
         turned = np.zeros(n, bool)
         measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
+        doubtful = np.zeros(n, bool)  # moving, and not found where the frame supports it
         pts, cols = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
         pred = predict(self.prev, self.dx, self.drot, self.cfg.damping)
         owner = assign_points(pts, cols, self.models, pred, self.cfg, self.known)
@@ -474,10 +478,11 @@ class FrameTracker:
             share = 0.0 if status_t[i] == TrackStatus.LOST else self._support(i, pose, rgb, depth, anchored)
             floor = float(np.fmax(self.cfg.min_explained, self.support_ref[i] - self.cfg.support_drop))
             if share < floor:
-                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, rgb, depth, share)
+                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth, share)
                 if found is not None:
                     pose, self.fitted[i], turned[i], share = found
                     status_t[i], measured[i] = TrackStatus.OK, True
+                doubtful[i] = share < self.cfg.min_explained and not anchored
                 if share < floor and status_t[i] == TrackStatus.OK:
                     status_t[i] = TrackStatus.SUSPECT
                 elif anchored and not measured[i] and _seen_past(
@@ -505,15 +510,18 @@ class FrameTracker:
             found_poses, ok = self.redetect(pts[owner < 0], cols[owner < 0], search.tolist())
             for i, p in zip(search[ok], found_poses[ok]):
                 pose_t[i], status_t[i], self.known[i] = p, TrackStatus.SUSPECT, True
-        good = status_t != TrackStatus.LOST
+        good = (status_t != TrackStatus.LOST) & ~doubtful  # a pose to move on from
         self.grip, self.in_hand = _grips(pose_t, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip, self.cfg)
         if self.rest is not None:
             self.grip[self.rest.anchored] = np.nan  # put down
         if self.t > 0:
-            moved = good & (self.lost_for == 0)  # a velocity needs two good frames in a row
-            self.dx[moved] = pose_t[moved, :3] - self.prev[moved, :3]
-            self.drot[moved] = (Rotation.from_quat(pose_t[moved, 3:]) * Rotation.from_quat(self.prev[moved, 3:]).inv()).as_rotvec()
-        self.dx[~good | turned], self.drot[~good | turned] = 0.0, 0.0  # a half turn is a correction, not motion
+            gap = 1.0 + self.lost_for
+            moved = good & (gap <= 3)  # a velocity over at most three frames
+            self.dx[moved] = (pose_t[moved, :3] - self.prev[moved, :3]) / gap[moved, None]
+            self.drot[moved] = (Rotation.from_quat(pose_t[moved, 3:]) * Rotation.from_quat(self.prev[moved, 3:]).inv()
+                                ).as_rotvec() / gap[moved, None]
+        stop = (status_t == TrackStatus.LOST) | turned  # a doubtful object is looked for further along its way
+        self.dx[stop], self.drot[stop] = 0.0, 0.0  # a half turn is a correction, not motion
         self.prev[good] = pose_t[good]
         self.lost_for = np.where(good, 0, self.lost_for + 1)
         self.t += 1
