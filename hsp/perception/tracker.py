@@ -11,10 +11,16 @@ A multicoloured object without symmetry is checked for half turns its shape cann
 apart. Objects at rest are settled on their support and held while hidden
 (:mod:`hsp.perception.rest`); when one comes to rest, its heading and position are taken
 from the image edges of its creases (:mod:`hsp.perception.edges`), which depth hardly
-fixes. Each pose is marked ok / suspect / lost from the number of supporting points and
-the inlier RMSE, and a moving object's pose is suspect when the depth image sees past
-it; one the end-effector carries is then registered again from its grip (ICP slides a
-long round handle along itself).
+fixes. Each pose is marked lost with too few supporting points and suspect with a loose
+fit; and it is ok only if the frame supports it (:mod:`hsp.perception.evidence`): enough
+of the object's seen surface lies at its depth in its colours, not much less than usual
+for that object, and, for an object the end-effector may carry, the depth image does not
+see past it. A moving object the frame does not support is looked for again, with wider
+ICP gates, from its grip if the end-effector carries it, from further along its way, from
+where it was, and from the centre of its colours nearby; the best supported is kept. One
+still not found is looked for further along its way in the next frames, and globally
+after a few of them, like a lost one. A fast hand (5 cm between frames, three times the
+first gate) is thus followed, and a pose left on another object's points is never ok.
 
 The tracker is given its start poses; :mod:`hsp.perception.initialize` estimates them
 from the first frame.
@@ -164,9 +170,10 @@ def _icp(model: SurfaceModel, points_obj: np.ndarray, cfg: TrackerConfig,
         target = model.cloud.select_by_index(facing)
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_obj))
     T = np.eye(4)
-    est = o3d.pipelines.registration.TransformationEstimationPointToPlane(o3d.pipelines.registration.TukeyLoss(k=cfg.tukey_m))
     result = None
-    for gate in gates or cfg.gates_m:
+    for gate in gates or cfg.gates_m:  # the robust kernel no narrower than half the gate: a wide search must move
+        est = o3d.pipelines.registration.TransformationEstimationPointToPlane(
+            o3d.pipelines.registration.TukeyLoss(k=max(cfg.tukey_m, gate / 2)))
         result = o3d.pipelines.registration.registration_icp(
             src, target, gate, T, est, o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=20))
         T = result.transformation
