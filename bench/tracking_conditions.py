@@ -34,7 +34,7 @@ from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.record import RecordConfig, camera_rig, record
 from hsp.tasks.registry import default_pipeline_dir, list_tasks, load_task
 
-VIEWS = {"default": None, "side": (0.75, -0.85, 0.75), "high": (1.2, 0.35, 1.45), "low": (1.4, 0.45, 0.4)}
+VIEWS = {"default": None, "side": (0.75, -0.85, 0.75), "high": (1.15, 0.0, 1.25), "low": (1.4, 0.45, 0.4)}
 FAST = {"speed": 1.8, "min_duration": 0.55, "pause": (0.0, 0.15), "tremor": 2.5}
 """The fast demonstrator: factors of the task's speed, minimum segment duration and tremor; its pauses (s)."""
 

@@ -96,11 +96,11 @@ class TrackerConfig:
     frame sees supports it (at their depth, in their colour: :func:`~hsp.perception.evidence.explained`);
     ICP can fit a fast hand's few points, or a block's, from 10 cm away."""
     support_drop: float = 0.1
-    """... and at most this much below the object's usual share (its running mean over
-    frames it was ok in: dark, small or two-coloured objects are explained less): a hand
-    1.5 cm off on the brush it holds is still half explained."""
+    """... and at most this much below the object's usual share (dark, small or two-coloured
+    objects are explained less): a hand 1.5 cm off on the brush it holds is still half
+    explained. The usual share rises at once to a frame's that is higher ..."""
     support_rate: float = 0.1
-    """Weight of each new ok frame in that running mean."""
+    """... and falls by this fraction of the difference to a frame's that is lower."""
     search_gates_m: tuple[float, ...] = (0.05, 0.015, 0.006)
     """ICP's gates when a moving object the frame does not explain is looked for again."""
     search_m: float = 0.1
@@ -422,7 +422,7 @@ class FrameTracker:
         self.fitted = np.zeros(n)  # fit cost at each object's last ICP solution
         self.grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
         self.in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
-        self.support_ref = np.full(n, np.nan)  # each object's usual support when ok (a running mean)
+        self.support_ref = np.full(n, np.nan)  # each object's usual support (TrackerConfig.support_drop)
         self.t = 0
         if rest is not None:
             rest.start(start, self.known)
@@ -495,9 +495,9 @@ class FrameTracker:
                 elif anchored and not measured[i] and _seen_past(
                         self.models[i], pred[i], depth, self.K, self.T_world_cam) <= self.rest.cfg.max_seen_through:
                     status_t[i] = TrackStatus.SUSPECT  # hidden where it rests: held there
-            if status_t[i] == TrackStatus.OK:
+            if measured[i]:  # raised at once by a better supported frame, lowered slowly by worse ones
                 r = self.support_ref[i]
-                self.support_ref[i] = share if np.isnan(r) else r + self.cfg.support_rate * (share - r)
+                self.support_ref[i] = np.fmax(share, r + self.cfg.support_rate * (share - r))
             pose_t[i] = pose
         pose_t[~self.known], status_t[~self.known] = self.prev[~self.known], TrackStatus.LOST
         if self.rest is not None:
@@ -516,7 +516,7 @@ class FrameTracker:
         if self.redetect is not None and search.size:
             found_poses, ok = self.redetect(pts[owner < 0], cols[owner < 0], search.tolist())
             for i, p in zip(search[ok], found_poses[ok]):
-                pose_t[i], status_t[i], self.known[i] = p, TrackStatus.SUSPECT, True
+                pose_t[i], status_t[i], self.known[i], doubtful[i] = p, TrackStatus.SUSPECT, True, False
         good = (status_t != TrackStatus.LOST) & ~doubtful  # a pose to move on from
         self.grip, self.in_hand = _grips(pose_t, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip, self.cfg)
         if self.rest is not None:
