@@ -25,7 +25,7 @@ from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
 from hsp.parallel import captured_warnings, one_omp_thread, pin_to_one_core
 from hsp.perception.episode import object_models, track_recording
-from hsp.perception.metrics import auc, episode_errors, match_identical
+from hsp.perception.metrics import auc, episode_errors, match_identical, status_trust
 from hsp.perception.table import GROUND_TRUTH_FRAME, TableConfig, in_recorded_world, table_frame
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.ground_truth import GroundTruth, matching_ground_truth, read_ground_truth
@@ -128,7 +128,8 @@ class TrackOutcome:
     frames: int
     seconds: float
     errors: dict[str, np.ndarray] | None
-    """Per-frame errors against the recorded truth (``None`` without ground truth)."""
+    """Per-frame errors against the recorded truth and ``ok``, the frames the tracker marked
+    ok, all ``(T, n)`` in the truth's object order (``None`` without ground truth)."""
 
 
 def identical_groups(task: Task) -> list[list[int]]:
@@ -155,6 +156,7 @@ def _track_one(job: TrackJob) -> TrackOutcome:
         samples = [np.asarray(m.cloud.points)[::3] for m in models]
         order = match_identical(identical_groups(task), tracked.poses, gt.poses)
         errors = episode_errors([o.symmetry for o in task.objects], samples, tracked.poses[:, order], gt.poses)
+        errors["ok"] = tracked.status[:, order] == TrackStatus.OK
     episode = EpisodePoses(job.name, tracked.poses, tracked.status, job.check.episode_info())
     return TrackOutcome(episode, frames, tracked.seconds, errors)
 
@@ -200,7 +202,8 @@ def _tracked_episodes(jobs: list[TrackJob], pool: ProcessPoolExecutor,
 
 def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall_seconds: float) -> dict[str, float | int | str]:
     """``reports/TASK/tracking.json``: errors over all frames and objects (lost ones included),
-    per object too, and the tracking rate."""
+    per object too, how far the status can be trusted (:func:`status_trust`: ``ok_accurate``,
+    ``inaccurate_flagged``), and the tracking rate."""
     frames = sum(o.frames for o in outcomes)
     status = np.concatenate([o.episode.status for o in outcomes])
     report: dict[str, float | int | str] = {
@@ -224,11 +227,14 @@ def tracking_report(task: Task, outcomes: list[TrackOutcome], workers: int, wall
             "rotation_error_deg_p95": float(np.percentile(err["rotation_deg"], 95)),
             "adds_auc": auc(err["adds_m"]),
         })
+        report["ok_accurate"], report["inaccurate_flagged"] = status_trust(err["translation_mm"], err["rotation_deg"], err["ok"])
         for i, name in enumerate(task.names):
             report[f"objects.{name}.translation_error_mm_median"] = float(np.median(err["translation_mm"][:, i]))
             report[f"objects.{name}.translation_error_mm_p95"] = float(np.percentile(err["translation_mm"][:, i], 95))
             report[f"objects.{name}.rotation_error_deg_median"] = float(np.median(err["rotation_deg"][:, i]))
             report[f"objects.{name}.lost_fraction"] = float(np.mean(status[:, i] == TrackStatus.LOST))
+            report[f"objects.{name}.ok_accurate"], report[f"objects.{name}.inaccurate_flagged"] = status_trust(
+                err["translation_mm"][:, i], err["rotation_deg"][:, i], err["ok"][:, i])
     return report
 
 

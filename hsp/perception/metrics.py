@@ -1,5 +1,6 @@
 """Pose-tracking errors against ground truth: translation, symmetry-aware rotation, ADD-S
-and its area under the accuracy curve (0–10 cm, ×100, as se(3)-TrackNet's VOCap)."""
+and its area under the accuracy curve (0–10 cm, ×100, as se(3)-TrackNet's VOCap); how far the
+tracker's own status can be trusted."""
 
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ from hsp.geometry.symmetry import symmetry_rotations
 from hsp.tasks.spec import Symmetry
 
 AUC_MAX_M = 0.10
+ACCURATE_MM = 10.0
+ACCURATE_DEG = 5.0
+"""A pose within 1 cm and 5° of the truth is accurate: what a frame marked ok must be."""
 
 
 def rotation_error_deg(q_est: np.ndarray, q_gt: np.ndarray, symmetry: Symmetry) -> np.ndarray:
@@ -70,3 +74,15 @@ def episode_errors(symmetries: list[Symmetry], samples: list[np.ndarray], poses:
     re = np.stack([rotation_error_deg(poses[:, i, 3:], truth[:, i, 3:], s) for i, s in enumerate(symmetries)], axis=1)
     adds = np.stack([add_s(samples[i], poses[:, i], truth[:, i]) for i in range(len(symmetries))], axis=1)
     return {"translation_mm": te, "rotation_deg": re, "adds_m": adds}
+
+
+def status_trust(translation_mm: np.ndarray, rotation_deg: np.ndarray, ok: np.ndarray) -> tuple[float, float]:
+    """How far a tracker's status can be filtered on, from errors and ``ok`` flags of the
+    same shape: the share of poses marked ok that are accurate (within ``ACCURATE_MM`` and
+    ``ACCURATE_DEG``), and the share of inaccurate poses not marked ok (suspect or lost).
+    NaN where there are no such poses."""
+    accurate = (translation_mm <= ACCURATE_MM) & (rotation_deg <= ACCURATE_DEG)
+    ok = np.asarray(ok, bool)
+    precision = float(np.mean(accurate[ok])) if ok.any() else float("nan")
+    flagged = float(np.mean(~ok[~accurate])) if (~accurate).any() else float("nan")
+    return precision, flagged

@@ -9,7 +9,7 @@ is released as soon as ICP finds it more than ``release_m`` away: it is being mo
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as the depth image does not
-see through where it would be (:func:`seen_through`). A mounted object (a nut on its stud)
+see through where it would be (:func:`~hsp.perception.evidence.seen_through`). A mounted object (a nut on its stud)
 hidden under the end-effector, whose origin sits on its axis, turns with it: a socket
 turning on a nut turns the nut. Held still instead, a hex nut turned by 57° under the socket
 reads as unturned (its heading is seen modulo 60° once the socket lifts), and labels put the
@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hsp.perception.pointcloud import project
 
 CUBE_AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
 UPRIGHT = np.array([[0.0, 0.0, 1.0]])
@@ -72,26 +71,6 @@ def upright(q: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
     if s < 1e-12:
         return R.as_quat(), tilt
     return (Rotation.from_rotvec(axis / s * np.radians(tilt)) * R).as_quat(), tilt
-
-
-def seen_through(surface: np.ndarray, normals: np.ndarray, pose_matrix: np.ndarray, depth: np.ndarray, K: np.ndarray,
-                 T_world_cam: np.ndarray, margin_m: float = 0.01) -> float:
-    """Share of the object's camera-facing surface samples (object frame ``(M, 3)``, with
-    normals) at pose ``pose_matrix (4, 4)`` whose pixel reads at least ``margin_m`` deeper:
-    the camera sees past where the object would be. 1 when none project into the image
-    with a reading."""
-    pts = surface @ pose_matrix[:3, :3].T + pose_matrix[:3, 3]
-    nrm = normals @ pose_matrix[:3, :3].T
-    camera = T_world_cam[:3]
-    pts = pts[np.sum(nrm * (camera - pts), axis=1) > 0]
-    uv, z = project(pts, K, T_world_cam)
-    u, v = np.round(uv).astype(int).T
-    inside = (z > 0) & (u >= 0) & (v >= 0) & (u < depth.shape[1]) & (v < depth.shape[0])
-    d = depth[v[inside], u[inside]]
-    seen = d > 0
-    if not seen.any():
-        return 1.0
-    return float(np.mean(d[seen] > z[inside][seen] + margin_m))
 
 
 def _heading_change(q: np.ndarray, q_anchor: np.ndarray, period: float) -> float | None:

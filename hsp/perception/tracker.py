@@ -11,10 +11,16 @@ A multicoloured object without symmetry is checked for half turns its shape cann
 apart. Objects at rest are settled on their support and held while hidden
 (:mod:`hsp.perception.rest`); when one comes to rest, its heading and position are taken
 from the image edges of its creases (:mod:`hsp.perception.edges`), which depth hardly
-fixes. Each pose is marked ok / suspect / lost from the number of supporting points and
-the inlier RMSE, and a moving object's pose is suspect when the depth image sees past
-it; one the end-effector carries is then registered again from its grip (ICP slides a
-long round handle along itself).
+fixes. Each pose is marked lost with too few supporting points and suspect with a loose
+fit; and it is ok only if the frame supports it (:mod:`hsp.perception.evidence`): enough
+of the object's seen surface lies at its depth in its colours, not much less than usual
+for that object, and, for an object the end-effector may carry, the depth image does not
+see past it. A moving object the frame does not support is looked for again, with wider
+ICP gates, from its grip if the end-effector carries it, from further along its way, from
+where it was, and from the centre of its colours nearby; the best supported is kept. One
+still not found is looked for further along its way in the next frames, and globally
+after a few of them, like a lost one. A fast hand (5 cm between frames, three times the
+first gate) is thus followed, and a pose left on another object's points is never ok.
 
 The tracker is given its start poses; :mod:`hsp.perception.initialize` estimates them
 from the first frame.
@@ -35,7 +41,8 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix, relative
 from hsp.perception.edges import EdgeConfig, crease_edges, image_gradient, refine_on_edges
 from hsp.perception.pointcloud import backproject, colour_match, palette_mask
-from hsp.perception.rest import RestConfig, RestState, seen_through
+from hsp.perception.evidence import explained, seen_through
+from hsp.perception.rest import RestConfig, RestState
 from hsp.sim.render import Mesh
 
 
@@ -84,6 +91,21 @@ class TrackerConfig:
     carry_step_m: float = 0.003
     """An object that moves this far in a frame while keeping its pose relative to the
     end-effector (to a third of that) is carried by it, until it comes to rest."""
+    min_explained: float = 0.5
+    """A pose is ok only if at least this share of the object's surface samples that the
+    frame sees supports it (at their depth, in their colour: :func:`~hsp.perception.evidence.explained`);
+    ICP can fit a fast hand's few points, or a block's, from 10 cm away."""
+    support_drop: float = 0.1
+    """... and at most this much below the object's usual share (dark, small or two-coloured
+    objects are explained less): a hand 1.5 cm off on the brush it holds is still half
+    explained. The usual share rises at once to a frame's that is higher ..."""
+    support_rate: float = 0.1
+    """... and falls by this fraction of the difference to a frame's that is lower."""
+    search_gates_m: tuple[float, ...] = (0.05, 0.015, 0.006)
+    """ICP's gates when a moving object the frame does not explain is looked for again."""
+    search_m: float = 0.1
+    """How far beyond its prediction's reach such an object is looked for by its colours (m):
+    a hand at 1.5 m/s between frames at 15 frames/s."""
 
 
 def _face_cross(tri: np.ndarray) -> np.ndarray:
@@ -135,9 +157,10 @@ class SurfaceModel:
 
 
 def _icp(model: SurfaceModel, points_obj: np.ndarray, cfg: TrackerConfig,
-         camera_obj: np.ndarray | None = None) -> tuple[np.ndarray, float, int]:
+         camera_obj: np.ndarray | None = None, gates: tuple[float, ...] | None = None) -> tuple[np.ndarray, float, int]:
     """Correction ``T (4, 4)`` taking the points (in the predicted object frame) onto the
-    model, the inlier RMSE and the inlier count at the last gate. With the camera position
+    model, the inlier RMSE and the inlier count at the last gate (``gates``, default
+    ``cfg.gates_m``). With the camera position
     in the object frame, only model samples facing the camera are matched (back faces
     cannot have produced the points)."""
     target = model.cloud
@@ -147,9 +170,10 @@ def _icp(model: SurfaceModel, points_obj: np.ndarray, cfg: TrackerConfig,
         target = model.cloud.select_by_index(facing)
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_obj))
     T = np.eye(4)
-    est = o3d.pipelines.registration.TransformationEstimationPointToPlane(o3d.pipelines.registration.TukeyLoss(k=cfg.tukey_m))
     result = None
-    for gate in cfg.gates_m:
+    for gate in gates or cfg.gates_m:  # the robust kernel no narrower than half the gate: a wide search must move
+        est = o3d.pipelines.registration.TransformationEstimationPointToPlane(
+            o3d.pipelines.registration.TukeyLoss(k=max(cfg.tukey_m, gate / 2)))
         result = o3d.pipelines.registration.registration_icp(
             src, target, gate, T, est, o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=20))
         T = result.transformation
@@ -218,7 +242,7 @@ def settle_on_edges(model: SurfaceModel, pose: np.ndarray, points: np.ndarray, g
 
 
 def _register(model: SurfaceModel, points: np.ndarray, cols: np.ndarray, pred: np.ndarray, fitted: float,
-              cfg: TrackerConfig) -> tuple[np.ndarray, float, int, float, bool]:
+              cfg: TrackerConfig, gates: tuple[float, ...] | None = None) -> tuple[np.ndarray, float, int, float, bool]:
     """Pose of one object from the scene points it owns, starting at ``pred``: ICP unless
     the prediction fits as well as the last solution (cost ``fitted``), kept only if it fits
     better than the prediction; then the half-turn check. Returns the pose, the fit cost of
@@ -228,7 +252,7 @@ def _register(model: SurfaceModel, points: np.ndarray, cols: np.ndarray, pred: n
     local = (points - pose[:3]) @ pose_to_matrix(pose)[:3, :3]
     cost, inliers, rmse = _fit(model, local, cfg)
     if cost > cfg.skip_ratio * fitted:  # else the prediction fits as well as the last solution
-        corr, rmse, inliers = _icp(model, local, cfg)  # no culling here: it lost objects mid-turn
+        corr, rmse, inliers = _icp(model, local, cfg, gates=gates)  # no culling here: it lost objects mid-turn
         moved = local @ corr[:3, :3].T + corr[:3, 3]
         cost_icp = _fit_cost(model, moved, cfg)
         if cost_icp < (1 - cfg.min_gain) * cost:
@@ -271,25 +295,53 @@ def _owned(owner: np.ndarray, i: int, cfg: TrackerConfig) -> np.ndarray:
 
 def _seen_past(model: SurfaceModel, pose: np.ndarray, depth: np.ndarray, K: np.ndarray,
                T_world_cam: np.ndarray) -> float:
-    """:func:`~hsp.perception.rest.seen_through` of ``model`` at world ``pose (7,)``."""
+    """:func:`~hsp.perception.evidence.seen_through` of ``model`` at world ``pose (7,)``."""
     return seen_through(model.surface, model.normals, pose_to_matrix(pose), depth, K, T_world_cam)
 
 
-def _retry(i: int, pred: np.ndarray, pts: np.ndarray, cols: np.ndarray, depth: np.ndarray, K: np.ndarray,
-           T_world_cam: np.ndarray, models: list[SurfaceModel], known: np.ndarray,
-           cfg: TrackerConfig) -> tuple[np.ndarray, float] | None:
-    """Object ``i`` registered again from ``pred[i]`` (the others' predictions decide which
-    points are its): the pose and fit cost if it fits (status ok) without the depth image
-    seeing through it, else None."""
-    sel = _owned(assign_points(pts, cols, models, pred, cfg, known), i, cfg)
-    if sel.size < cfg.min_points:
+def _explained(model: SurfaceModel, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray,
+               T_world_cam: np.ndarray, cfg: TrackerConfig) -> float:
+    """:func:`~hsp.perception.evidence.explained` of ``model`` at world ``pose (7,)``."""
+    return explained(model.surface, model.normals, model.sample_rgb, pose_to_matrix(pose), rgb, depth, K, T_world_cam,
+                     cfg.colour_tolerance)[0]
+
+
+def colour_centre(model: SurfaceModel, pts: np.ndarray, cols: np.ndarray, pose: np.ndarray, reach: float,
+                  cfg: TrackerConfig) -> np.ndarray | None:
+    """``pose (7,)`` moved so that the model's centroid lies on the centroid of the points
+    ``(N, 3)`` of its colours within ``reach`` of it; None when there are too few."""
+    near = np.flatnonzero(np.sum((pts - pose[:3]) ** 2, axis=1) < reach**2)
+    near = near[model.colour_mask(cols[near], cfg.colour_tolerance)]
+    if near.size < cfg.min_points:
         return None
-    pose, cost, inliers, rmse, _ = _register(models[i], pts[sel], cols[sel], pred[i], 0.0, cfg)  # ICP always
-    if _status(inliers, rmse, cfg) != TrackStatus.OK:
-        return None
-    if _seen_past(models[i], pose, depth, K, T_world_cam) > cfg.max_seen_through:
-        return None
-    return pose, cost
+    centroid = pose_to_matrix(pose)[:3, :3] @ model.centroid + pose[:3]
+    return np.concatenate([pose[:3] + pts[near].mean(axis=0) - centroid, pose[3:]])
+
+
+def _search(i: int, starts: list[np.ndarray], pred: np.ndarray, pts: np.ndarray, cols: np.ndarray,
+            models: list[SurfaceModel], known: np.ndarray, support: Callable[[np.ndarray], float], floor: float,
+            cfg: TrackerConfig) -> tuple[np.ndarray, float, int, float] | None:
+    """Object ``i`` registered again from each of ``starts`` (poses ``(7,)``; the others'
+    predictions ``pred`` decide which points are its), ICP with ``cfg.search_gates_m``: the
+    pose, fit cost, index and ``support`` of the start whose registration fits (status ok)
+    and the frame supports best, if above ``floor``."""
+    best = None
+    reach = models[i].radius + cfg.crop_margin_m + max(np.linalg.norm(p[:3] - pred[i, :3]) for p in starts)
+    near = np.flatnonzero(np.sum((pts - pred[i, :3]) ** 2, axis=1) < reach**2)  # the points any start can own
+    pts, cols = pts[near], cols[near]
+    for k, start in enumerate(starts):
+        trial = pred.copy()
+        trial[i] = start
+        sel = _owned(assign_points(pts, cols, models, trial, cfg, known), i, cfg)
+        if sel.size < cfg.min_points:
+            continue
+        pose, cost, inliers, rmse, _ = _register(models[i], pts[sel], cols[sel], start, 0.0, cfg, cfg.search_gates_m)
+        if _status(inliers, rmse, cfg) != TrackStatus.OK:
+            continue
+        share = support(pose)
+        if share > floor:
+            best, floor = (pose, cost, k, share), share
+    return best
 
 
 def _status(inliers: int, rmse: float, cfg: TrackerConfig) -> TrackStatus:
@@ -370,9 +422,44 @@ class FrameTracker:
         self.fitted = np.zeros(n)  # fit cost at each object's last ICP solution
         self.grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
         self.in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
+        self.support_ref = np.full(n, np.nan)  # each object's usual support (TrackerConfig.support_drop)
         self.t = 0
         if rest is not None:
             rest.start(start, self.known)
+
+    def _support(self, i: int, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, anchored: bool) -> float:
+        """How far the frame supports object ``i`` at ``pose``: the :func:`_explained` share of
+        its seen surface; 0 for an object the end-effector may carry when the depth image sees
+        past much of it (ICP slides a long round handle along itself)."""
+        if i > 0 and not anchored and _seen_past(self.models[i], pose, depth, self.K,
+                                                 self.T_world_cam) > self.cfg.max_seen_through:
+            return 0.0
+        return _explained(self.models[i], pose, rgb, depth, self.K, self.T_world_cam, self.cfg)
+
+    def _look_again(self, i: int, pred: np.ndarray, pose_t: np.ndarray, status_t: np.ndarray, pts: np.ndarray,
+                    cols: np.ndarray, owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
+                    share: float) -> tuple[np.ndarray, float, bool, float] | None:
+        """Moving object ``i``, lost or not explained at its prediction (``share``), searched
+        for (:func:`_search`) from its grip on the end-effector if it is carried, its last pose
+        moved on by the whole of its last motion, its last pose, and its colours' centre near
+        the prediction: pose, fit cost, whether it is a correction (the grip), not motion, and
+        its support."""
+        ahead = 1.0 + self.lost_for[i]  # frames since its last pose to move on from
+        starts = [predict(self.prev[i:i + 1], ahead * self.dx[i:i + 1], ahead * self.drot[i:i + 1], 1.0)[0], self.prev[i]]
+        reach = self.models[i].radius + self.cfg.search_m * (1 + self.lost_for[i])  # further for each frame it was not found
+        free = (owner < 0) | (owner == i)  # not another object's
+        centre = colour_centre(self.models[i], pts[free], cols[free], pred[i], reach, self.cfg)
+        if centre is not None:
+            starts.append(centre)
+        carried = i > 0 and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0])
+        if carried:
+            starts.insert(0, compose(pose_t[0], self.grip[i]))
+        found = _search(i, starts, pred, pts, cols, self.models, self.known,
+                        lambda p: self._support(i, p, rgb, depth, False), share, self.cfg)
+        if found is None:
+            return None
+        pose, cost, start, share = found
+        return pose, cost, carried and start == 0, share
 
     def update(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Poses ``(n, 7)`` and status ``(n,)`` in the frame ``rgb (H, W, 3)``, ``depth (H, W)`` m."""
@@ -381,32 +468,36 @@ class FrameTracker:
         status_t = np.full(n, TrackStatus.OK, np.int64)
         turned = np.zeros(n, bool)
         measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
+        doubtful = np.zeros(n, bool)  # moving, and not found where the frame supports it
         pts, cols = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
         pred = predict(self.prev, self.dx, self.drot, self.cfg.damping)
         owner = assign_points(pts, cols, self.models, pred, self.cfg, self.known)
         for i in np.flatnonzero(self.known):
             sel = _owned(owner, i, self.cfg)
-            if sel.size < self.cfg.min_points:
-                pose_t[i], status_t[i] = pred[i], TrackStatus.LOST
-                if self.rest is not None and self.rest.anchored[i] and _seen_past(
+            anchored = self.rest is not None and self.rest.anchored[i]  # a resting object has its own checks
+            if sel.size >= self.cfg.min_points:
+                measured[i] = True
+                pose, self.fitted[i], inliers, rmse, turned[i] = _register(self.models[i], pts[sel], cols[sel], pred[i],
+                                                                           self.fitted[i], self.cfg)
+                status_t[i] = _status(inliers, rmse, self.cfg)
+            else:
+                pose, status_t[i] = pred[i], TrackStatus.LOST
+            share = 0.0 if status_t[i] == TrackStatus.LOST else self._support(i, pose, rgb, depth, anchored)
+            floor = float(np.fmax(self.cfg.min_explained, self.support_ref[i] - self.cfg.support_drop))
+            if share < floor:
+                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth, share)
+                if found is not None:
+                    pose, self.fitted[i], turned[i], share = found
+                    status_t[i], measured[i] = TrackStatus.OK, True
+                doubtful[i] = share < self.cfg.min_explained and not anchored
+                if share < floor and status_t[i] == TrackStatus.OK:
+                    status_t[i] = TrackStatus.SUSPECT
+                elif anchored and not measured[i] and _seen_past(
                         self.models[i], pred[i], depth, self.K, self.T_world_cam) <= self.rest.cfg.max_seen_through:
                     status_t[i] = TrackStatus.SUSPECT  # hidden where it rests: held there
-                continue
-            measured[i] = True
-            pose, cost, inliers, rmse, turned[i] = _register(self.models[i], pts[sel], cols[sel], pred[i], self.fitted[i], self.cfg)
-            self.fitted[i] = cost
-            status_t[i] = _status(inliers, rmse, self.cfg)
-            moving = i > 0 and (self.rest is None or not self.rest.anchored[i])  # a resting object has its own checks
-            if moving and status_t[i] != TrackStatus.LOST and _seen_past(
-                    self.models[i], pose, depth, self.K, self.T_world_cam) > self.cfg.max_seen_through:
-                status_t[i] = TrackStatus.SUSPECT
-                if self.known[0] and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0]):
-                    carried = pred.copy()
-                    carried[i] = compose(pose_t[0], self.grip[i])
-                    retry = _retry(i, carried, pts, cols, depth, self.K, self.T_world_cam, self.models, self.known, self.cfg)
-                    if retry is not None:
-                        pose, self.fitted[i] = retry
-                        status_t[i], turned[i] = TrackStatus.OK, True  # a correction, not motion
+            if measured[i]:  # raised at once by a better supported frame, lowered slowly by worse ones
+                r = self.support_ref[i]
+                self.support_ref[i] = np.fmax(share, r + self.cfg.support_rate * (share - r))
             pose_t[i] = pose
         pose_t[~self.known], status_t[~self.known] = self.prev[~self.known], TrackStatus.LOST
         if self.rest is not None:
@@ -425,16 +516,19 @@ class FrameTracker:
         if self.redetect is not None and search.size:
             found_poses, ok = self.redetect(pts[owner < 0], cols[owner < 0], search.tolist())
             for i, p in zip(search[ok], found_poses[ok]):
-                pose_t[i], status_t[i], self.known[i] = p, TrackStatus.SUSPECT, True
-        good = status_t != TrackStatus.LOST
+                pose_t[i], status_t[i], self.known[i], doubtful[i] = p, TrackStatus.SUSPECT, True, False
+        good = (status_t != TrackStatus.LOST) & ~doubtful  # a pose to move on from
         self.grip, self.in_hand = _grips(pose_t, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip, self.cfg)
         if self.rest is not None:
             self.grip[self.rest.anchored] = np.nan  # put down
         if self.t > 0:
-            moved = good & (self.lost_for == 0)  # a velocity needs two good frames in a row
-            self.dx[moved] = pose_t[moved, :3] - self.prev[moved, :3]
-            self.drot[moved] = (Rotation.from_quat(pose_t[moved, 3:]) * Rotation.from_quat(self.prev[moved, 3:]).inv()).as_rotvec()
-        self.dx[~good | turned], self.drot[~good | turned] = 0.0, 0.0  # a half turn is a correction, not motion
+            gap = 1.0 + self.lost_for
+            moved = good & (gap <= 3)  # a velocity over at most three frames
+            self.dx[moved] = (pose_t[moved, :3] - self.prev[moved, :3]) / gap[moved, None]
+            self.drot[moved] = (Rotation.from_quat(pose_t[moved, 3:]) * Rotation.from_quat(self.prev[moved, 3:]).inv()
+                                ).as_rotvec() / gap[moved, None]
+        stop = (status_t == TrackStatus.LOST) | turned  # a doubtful object is looked for further along its way
+        self.dx[stop], self.drot[stop] = 0.0, 0.0  # a half turn is a correction, not motion
         self.prev[good] = pose_t[good]
         self.lost_for = np.where(good, 0, self.lost_for + 1)
         self.t += 1

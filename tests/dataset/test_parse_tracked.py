@@ -22,6 +22,7 @@ from hsp.sim.depth_noise import DepthNoiseConfig
 from tests.recording.fixtures import DRIVER_TF, write_rosbags_bag
 
 KEYS = {"translation_error_mm_median", "translation_error_mm_p95", "rotation_error_deg_median", "adds_auc",
+        "ok_accurate", "inaccurate_flagged",
         "lost_fraction", "frames_per_second"}
 
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from hsp.perception.metrics import add_s, auc, rotation_error_deg
+from hsp.perception.metrics import add_s, auc, rotation_error_deg, status_trust
 
 
 def test_rotation_error_respects_symmetry():
@@ -27,3 +27,13 @@ def test_add_s_of_a_known_shift_and_auc():
     assert auc(np.zeros(10)) == pytest.approx(100.0, abs=0.1)
     assert auc(np.full(10, 0.05)) == pytest.approx(50.0, abs=0.2)
     assert auc(np.full(10, 0.2)) == 0.0
+
+
+def test_status_trust_counts_ok_accuracy_and_flagged_errors():
+    te = np.array([1.0, 2.0, 50.0, 3.0, 30.0, 1.0])
+    re = np.array([0.5, 9.0, 1.0, 1.0, 1.0, 0.1])  # the second is 9° off: inaccurate
+    ok = np.array([True, True, True, False, False, True])
+    precision, flagged = status_trust(te, re, ok)
+    assert precision == 2 / 4  # ok: 0, 1, 2, 5; accurate among them: 0, 5
+    assert flagged == 1 / 3  # inaccurate: 1, 2, 4; not ok among them: 4
+    assert np.isnan(status_trust(te[:1], re[:1], ok[:1])[1])  # nothing inaccurate

@@ -3,7 +3,8 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState, seen_through, upright
+from hsp.perception.evidence import seen_through
+from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState, upright
 
 BOX = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (-0.02, 0.02)])
 """Corners of a 4 cm cube around its centre: enough for the lowest point."""

@@ -99,3 +99,19 @@ def test_a_held_brush_follows_the_hand_where_icp_would_slide_it_along_its_handle
     err_mm = np.linalg.norm(poses[:, brush, :3] - gt.poses[:, brush, :3], axis=1) * 1000
     assert np.percentile(err_mm, 95) < 10.0, np.percentile(err_mm, [50, 95, 100])
     assert np.mean((err_mm > 20.0) & (status[:, brush] == TrackStatus.OK)) < 0.03
+
+
+def test_a_demonstrator_twice_as_fast_is_followed_and_its_status_can_be_trusted(episode):
+    """Every second frame only: the hand moves twice as far between frames (up to 6 cm, four
+    times the first gate). Whatever ICP makes of the prediction, the frame must support the
+    pose; where it does not, the hand is looked for again. (Before: p95 285 mm, 13 % of the
+    frames marked ok more than 1 cm off.)"""
+    task, rec, gt, _ = episode
+    models = object_models(task, TrackerConfig(), 0)
+    truth = gt.poses[::2]
+    poses, status = track(rec.rgb[::2], rec.depth[::2], rec.K, rec.T_world_cam, models, truth[0], TrackerConfig(),
+                          rest=rest_state(task, models))
+    err_mm = np.linalg.norm(poses[:, :, :3] - truth[:, :, :3], axis=-1) * 1000
+    assert np.percentile(err_mm, 95) < 5.0, np.percentile(err_mm, 95, axis=0)
+    ok = status == TrackStatus.OK
+    assert np.mean(err_mm[ok] <= 10.0) >= 0.99 and ok.mean() > 0.9
