@@ -90,7 +90,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None, help="also write every tracking report here")
     args = ap.parse_args()
     params = load_params(Path("params.yaml"))
-    rows, reports = [], {}
+    reports = {}
     print(f"{'condition':9s} {'task':13s} {'speed':>5s} {'med mm':>7s} {'p95 mm':>7s} {'rot °':>6s} {'lost %':>6s} "
           f"{'ok acc':>7s} {'bad flag':>8s} {'fps':>5s}", flush=True)
     base_speed: dict[str, float] = {}
@@ -108,7 +108,6 @@ def main() -> None:
                    f"{t['translation_error_mm_p95']:7.1f} {t['rotation_error_deg_median']:6.2f} "
                    f"{100 * t['lost_fraction']:6.2f} {100 * t['ok_accurate']:6.1f}% {100 * t['inaccurate_flagged']:7.1f}% "
                    f"{t['frames_per_second']:5.1f}")
-            rows.append(row)
             print(row, flush=True)
     if args.json:
         args.json.write_text(json.dumps(reports, indent=1))

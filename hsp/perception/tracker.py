@@ -41,7 +41,7 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix, relative
 from hsp.perception.edges import EdgeConfig, crease_edges, image_gradient, refine_on_edges
 from hsp.perception.pointcloud import backproject, colour_match, palette_mask
-from hsp.perception.evidence import explained, seen_through
+from hsp.perception.evidence import Evidence, evidence, seen_through
 from hsp.perception.rest import RestConfig, RestState
 from hsp.sim.render import Mesh
 
@@ -160,9 +160,8 @@ def _icp(model: SurfaceModel, points_obj: np.ndarray, cfg: TrackerConfig,
          camera_obj: np.ndarray | None = None, gates: tuple[float, ...] | None = None) -> tuple[np.ndarray, float, int]:
     """Correction ``T (4, 4)`` taking the points (in the predicted object frame) onto the
     model, the inlier RMSE and the inlier count at the last gate (``gates``, default
-    ``cfg.gates_m``). With the camera position
-    in the object frame, only model samples facing the camera are matched (back faces
-    cannot have produced the points)."""
+    ``cfg.gates_m``). With the camera position in the object frame, only model samples
+    facing the camera are matched (back faces cannot have produced the points)."""
     target = model.cloud
     if camera_obj is not None:
         P, N = np.asarray(model.cloud.points), np.asarray(model.cloud.normals)
@@ -299,11 +298,11 @@ def _seen_past(model: SurfaceModel, pose: np.ndarray, depth: np.ndarray, K: np.n
     return seen_through(model.surface, model.normals, pose_to_matrix(pose), depth, K, T_world_cam)
 
 
-def _explained(model: SurfaceModel, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray,
-               T_world_cam: np.ndarray, cfg: TrackerConfig) -> float:
-    """:func:`~hsp.perception.evidence.explained` of ``model`` at world ``pose (7,)``."""
-    return explained(model.surface, model.normals, model.sample_rgb, pose_to_matrix(pose), rgb, depth, K, T_world_cam,
-                     cfg.colour_tolerance)[0]
+def _evidence(model: SurfaceModel, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray,
+              T_world_cam: np.ndarray, cfg: TrackerConfig) -> Evidence:
+    """:func:`~hsp.perception.evidence.evidence` of ``model`` at world ``pose (7,)``."""
+    return evidence(model.surface, model.normals, model.sample_rgb, pose_to_matrix(pose), rgb, depth, K, T_world_cam,
+                    cfg.colour_tolerance)
 
 
 def colour_centre(model: SurfaceModel, pts: np.ndarray, cols: np.ndarray, pose: np.ndarray, reach: float,
@@ -428,13 +427,13 @@ class FrameTracker:
             rest.start(start, self.known)
 
     def _support(self, i: int, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, anchored: bool) -> float:
-        """How far the frame supports object ``i`` at ``pose``: the :func:`_explained` share of
-        its seen surface; 0 for an object the end-effector may carry when the depth image sees
-        past much of it (ICP slides a long round handle along itself)."""
-        if i > 0 and not anchored and _seen_past(self.models[i], pose, depth, self.K,
-                                                 self.T_world_cam) > self.cfg.max_seen_through:
+        """How far the frame supports object ``i`` at ``pose``: the explained share of its seen
+        surface (:func:`_evidence`); 0 for an object the end-effector may carry when the depth
+        image sees past much of it (ICP slides a long round handle along itself)."""
+        ev = _evidence(self.models[i], pose, rgb, depth, self.K, self.T_world_cam, self.cfg)
+        if i > 0 and not anchored and ev.seen_through > self.cfg.max_seen_through:
             return 0.0
-        return _explained(self.models[i], pose, rgb, depth, self.K, self.T_world_cam, self.cfg)
+        return ev.share
 
     def _look_again(self, i: int, pred: np.ndarray, pose_t: np.ndarray, status_t: np.ndarray, pts: np.ndarray,
                     cols: np.ndarray, owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
@@ -445,7 +444,9 @@ class FrameTracker:
         the prediction: pose, fit cost, whether it is a correction (the grip), not motion, and
         its support."""
         ahead = 1.0 + self.lost_for[i]  # frames since its last pose to move on from
-        starts = [predict(self.prev[i:i + 1], ahead * self.dx[i:i + 1], ahead * self.drot[i:i + 1], 1.0)[0], self.prev[i]]
+        starts = [predict(self.prev[i:i + 1], ahead * self.dx[i:i + 1], ahead * self.drot[i:i + 1], 1.0)[0]]
+        if self.dx[i].any() or self.drot[i].any():  # else that is the last pose already
+            starts.append(self.prev[i])
         reach = self.models[i].radius + self.cfg.search_m * (1 + self.lost_for[i])  # further for each frame it was not found
         free = (owner < 0) | (owner == i)  # not another object's
         centre = colour_centre(self.models[i], pts[free], cols[free], pred[i], reach, self.cfg)
