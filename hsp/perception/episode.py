@@ -18,7 +18,8 @@ from hsp.errors import HspError
 from hsp.geometry.symmetry import z_folds
 from hsp.perception.initialize import initialize
 from hsp.perception.rest import CUBE_AXES, UPRIGHT, RestConfig, RestState
-from hsp.perception.tracker import FrameTracker, SurfaceModel, TrackerConfig, follow, scene_points
+from hsp.perception.tracker import (FrameTracker, Support, SurfaceModel, TrackerConfig, evidence_at, follow,
+                                    scene_points)
 from hsp.recording.reader import Recording
 from hsp.sim.render import load_mesh
 from hsp.tasks.registry import Task
@@ -61,10 +62,12 @@ def first_frame_tracker(task: Task, rgb: np.ndarray, depth: np.ndarray, K: np.nd
     feed it every frame from this one on."""
     camera = T_world_cam[:3]
     pts, cols = scene_points(rgb, depth, K, T_world_cam, cfg)
-    first, found = initialize(task, pts, cols, models, camera, cfg)
+    first, found = initialize(task, pts, cols, models, camera, cfg, focal_px=K[0, 0],
+                              support=lambda i, p: evidence_at(models[i], p, rgb, depth, K, T_world_cam, cfg).share)
 
-    def redetect(p: np.ndarray, c: np.ndarray, idx: list[int]) -> tuple[np.ndarray, np.ndarray]:
-        poses, ok = initialize(task, p, c, models, camera, cfg, only=idx, first_frame=False)
+    def redetect(p: np.ndarray, c: np.ndarray, idx: list[int], support: Support) -> tuple[np.ndarray, np.ndarray]:
+        poses, ok = initialize(task, p, c, models, camera, cfg, only=idx, first_frame=False, support=support,
+                               focal_px=K[0, 0])
         return poses[idx], ok[idx]
 
     return FrameTracker(K, T_world_cam, models, first, cfg, found, redetect, rest_state(task, models, cfg.rest))

@@ -17,6 +17,8 @@ tire-removal episode with the full fit, 1–2 s so.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import open3d as o3d
 from scipy.spatial.transform import Rotation
@@ -24,7 +26,7 @@ from scipy.spatial.transform import Rotation
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix
 from hsp.geometry.symmetry import z_folds
 from hsp.perception.pointcloud import SHADE_RANGE, colour_match, palette_mask
-from hsp.perception.tracker import SurfaceModel, TrackerConfig, _icp, colour_agreement
+from hsp.perception.tracker import Support, SurfaceModel, TrackerConfig, _icp, colour_agreement, min_points
 from hsp.tasks.layout import mesh_extent
 from hsp.tasks.registry import Task
 
@@ -39,6 +41,8 @@ REFINED = 4
 AIR_SHIFTS = [np.array(v) for v in ([0, 0, -0.04], [0, 0, -0.02], [0, 0, 0], [0, 0, 0.02], [0, 0, 0.04],
                                     [0.02, 0, 0], [-0.02, 0, 0], [0, 0.02, 0], [0, -0.02, 0])]
 """Where an object in the air may sit relative to its visible part's centre (m)."""
+AWAY_STEPS = (0.0, 0.25, 0.5, 0.75)
+"""Radii from its visible part's centre, away from the camera, that a resting object is tried at."""
 
 
 def _clusters(points: np.ndarray) -> list[np.ndarray]:
@@ -123,6 +127,16 @@ def _hypothesis(model: SurfaceModel, guess: np.ndarray, pts: np.ndarray, cols: n
     return float(2 * agree - len(near)), compose(guess, pose_from_matrix(np.linalg.inv(corr)))
 
 
+def _away(seen: np.ndarray, camera: np.ndarray, radius: float) -> list[np.ndarray]:
+    """Where an object resting on the table may sit relative to its visible part's centre
+    ``seen (3,)``: there, or up to ``AWAY_STEPS`` radii further from the camera, level. The
+    camera sees the near half of an object, so the near half's centre lies between the
+    camera and the object's (half a radius, from a low view of a wheel)."""
+    away = np.array([seen[0] - camera[0], seen[1] - camera[1], 0.0])
+    away /= max(np.linalg.norm(away), 1e-9)
+    return [f * radius * away for f in AWAY_STEPS]
+
+
 def _guesses(seen: np.ndarray, anchor: np.ndarray, yaws: np.ndarray, shifts: list[np.ndarray],
              rest_height: float | None) -> list[np.ndarray]:
     """Poses ``(7,)`` that put the model's ``anchor`` on the ``seen`` centre at each yaw,
@@ -154,17 +168,31 @@ def _screen(model: SurfaceModel, guesses: list[np.ndarray], pts: np.ndarray, col
 
 def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel], camera: np.ndarray,
                cfg: TrackerConfig = TrackerConfig(), only: list[int] | None = None,
-               first_frame: bool = True) -> tuple[np.ndarray, np.ndarray]:
+               first_frame: bool = True, support: Support | None = None,
+               focal_px: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """World poses ``(n, 7)`` and whether each was found ``(n,)``, for every object or the
     ``only`` ones; ``camera (3,)`` is the camera's world position (for back-face culling).
     In the first frame, objects placed on the table rest there upright; later (re-detection)
-    any object may be anywhere, upright or pointing down."""
+    any object may be anywhere, upright or pointing down. With the camera's ``focal_px``, a
+    small or far object needs fewer points (:func:`~hsp.perception.tracker.min_points`).
+
+    With the frame's ``support``, each estimate checks itself the other way round: the score
+    counts the scene points the model explains, the support the share of the model's seen
+    surface that the frame explains. A hypothesis wins on their product (a canvas slid 8 mm
+    along itself keeps every point on its surface, but its far edge hangs over the table:
+    support 0.97 against 1.0), and is found only if supported by ``cfg.min_explained``."""
     n = len(models)
     poses = np.tile([0, 0, 0, 0, 0, 0, 1.0], (n, 1))
     found = np.zeros(n, bool)
     taken: dict[bytes, set[int]] = {}
     screenings: dict[tuple, list] = {}
     palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
+
+    def needs(model: SurfaceModel, at: np.ndarray) -> TrackerConfig:
+        """``cfg`` with the fewest points that support ``model`` at ``at (3,)``."""
+        if focal_px is None:
+            return cfg
+        return replace(cfg, min_points=min_points(model, float(np.linalg.norm(at - camera)), focal_px, cfg))
     for i, (obj, model) in enumerate(zip(task.objects, models)):
         if only is not None and i not in only:
             continue
@@ -182,24 +210,26 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Surfa
             groups = _clusters(pts[mask])
             fits = [g for g, idx in enumerate(groups) if _extent(pts[mask[idx]]) <= 2 * reach]
             twins = sum(p.tobytes() == key for p in palettes) - 1
-            shifts = [np.zeros(3)] if rest_height is not None else AIR_SHIFTS  # visible part vs anchor, in the air
             yaws = _yaw_grid(obj.symmetry)
             screen = TrackerConfig(gates_m=coarse.gates_m[:1], tukey_m=coarse.tukey_m)
             screenings[same] = []
             for g in (fits or list(range(len(groups))))[: MAX_CLUSTERS + twins]:
                 seen = _centre_of_colour(pts[mask], pts[mask[groups[g]]].mean(axis=0), 1.5 * model.radius)
+                shifts = AIR_SHIFTS if rest_height is None else _away(seen, camera, model.radius)
                 guesses = _guesses(seen, anchor, yaws, shifts, rest_height)
                 screenings[same] += [(score, fitted, g) for score, fitted in
-                                     _screen(model, guesses, pts, cols, coloured, reach, camera, screen, cfg)]
+                                     _screen(model, guesses, pts, cols, coloured, reach, camera, screen, needs(model, seen))]
         screened = [h for h in screenings[same] if h[2] not in used]
         best = (-np.inf, None, -1)
         for _, guess, g in sorted(screened, key=lambda h: -h[0])[:REFINED]:
             near = _near(pts, coloured, guess[:3], reach)
-            if len(near) >= cfg.min_points:
+            need = needs(model, guess[:3]).min_points
+            if len(near) >= need:
                 score, fitted = _hypothesis(model, guess, pts, cols, near, camera, coarse, cfg)
-                if score > best[0]:
-                    best = (score, fitted, g)
-        if best[1] is not None and best[0] >= cfg.min_points:  # the agreement net of what is left unexplained
+                share = 1.0 if support is None else support(i, _upright(fitted) if rest_height is not None else fitted)
+                if score >= need and share >= cfg.min_explained and score * share > best[0]:
+                    best = (score * share, fitted, g)
+        if best[1] is not None:  # the agreement net of what is left unexplained
             resting = first_frame and i > 0 and obj.place.support != "air"
             poses[i], found[i] = _upright(best[1]) if resting else best[1], True
             used.add(best[2])

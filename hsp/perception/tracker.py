@@ -29,7 +29,7 @@ from the first frame.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import open3d as o3d
@@ -40,7 +40,7 @@ from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, pose_from_matrix, pose_to_matrix, relative
 from hsp.perception.edges import EdgeConfig, crease_edges, image_gradient, refine_on_edges
-from hsp.perception.pointcloud import backproject, colour_match, palette_mask
+from hsp.perception.pointcloud import backproject, chromaticity, colour_match, palette_mask
 from hsp.perception.evidence import Evidence, evidence, seen_through
 from hsp.perception.rest import RestConfig, RestState
 from hsp.sim.render import Mesh
@@ -51,7 +51,12 @@ class TrackerConfig:
     stride: int = 2
     """Use every stride-th pixel row and column."""
     table_clearance_m: float = 0.003
-    """Points lower than this above the table plane z = 0 are table."""
+    """Points lower than this above the table plane z = 0 are table ..."""
+    table_sigmas: float = 3.0
+    """... and, in the table's colours, lower than this many times the depth noise there
+    (:func:`table_clearance`) ..."""
+    table_colour_share: float = 0.02
+    """... the colours of at least this share of the points measured below the table."""
     crop_margin_m: float = 0.03
     colour_tolerance: float = 0.06
     """Largest chromaticity distance from the object's palette."""
@@ -60,6 +65,12 @@ class TrackerConfig:
     damping: float = 0.5
     """Fraction of the last frame's motion carried into the prediction."""
     min_points: int = 30
+    """Fewest scene points that support a pose (else lost) ..."""
+    min_seen: float = 0.5
+    """... or this share of the points an object far away or small can show, if fewer
+    (:func:`min_points`) ..."""
+    min_points_floor: int = 10
+    """... but never fewer than this."""
     suspect_rmse_m: float = 0.004
     model_points: int = 1500
     redetect_after: int = 5
@@ -128,6 +139,16 @@ def sample_surface(mesh: Mesh, n: int, rng: np.random.Generator) -> tuple[np.nda
     return points, cross[face] / np.maximum(area[face], 1e-12)[:, None], face
 
 
+def min_points(model: "SurfaceModel", distance: float, focal_px: float, cfg: TrackerConfig) -> int:
+    """Fewest scene points that support ``model``'s pose at ``distance`` (m) from a camera of
+    focal length ``focal_px``: ``cfg.min_points``, or ``cfg.min_seen`` of the points its mean
+    silhouette covers at ``cfg.stride`` if fewer (a convex body's mean projected area is a
+    quarter of its surface area, Cauchy), at least ``cfg.min_points_floor``. A nut 1.6 m
+    away shows 25 points."""
+    shown = model.area / 4 * (focal_px / (cfg.stride * max(distance, 1e-3))) ** 2
+    return int(np.clip(cfg.min_seen * shown, cfg.min_points_floor, cfg.min_points))
+
+
 class SurfaceModel:
     """Surface samples with normals and the colour palette of one object."""
 
@@ -146,6 +167,7 @@ class SurfaceModel:
         tri = mesh.vertices[mesh.triangles]
         self.face_centres = tri.mean(axis=1)
         self.face_area = 0.5 * np.linalg.norm(_face_cross(tri), axis=1)
+        self.area = float(self.face_area.sum())
         self.face_rgb = mesh.face_rgb
         self.centroid = points.mean(axis=0)
         self.can_flip = symmetry == "none" and len(self.palette) > 1
@@ -298,7 +320,7 @@ def _seen_past(model: SurfaceModel, pose: np.ndarray, depth: np.ndarray, K: np.n
     return seen_through(model.surface, model.normals, pose_to_matrix(pose), depth, K, T_world_cam)
 
 
-def _evidence(model: SurfaceModel, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray,
+def evidence_at(model: SurfaceModel, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray,
               T_world_cam: np.ndarray, cfg: TrackerConfig) -> Evidence:
     """:func:`~hsp.perception.evidence.evidence` of ``model`` at world ``pose (7,)``."""
     return evidence(model.surface, model.normals, model.sample_rgb, pose_to_matrix(pose), rgb, depth, K, T_world_cam,
@@ -383,16 +405,48 @@ def predict(prev: np.ndarray, dx: np.ndarray, drot: np.ndarray, alpha: float) ->
     return np.concatenate([prev[:, :3] + alpha * dx, q], axis=1)
 
 
-Redetect = Callable[[np.ndarray, np.ndarray, list[int]], tuple[np.ndarray, np.ndarray]]
-"""``(points, colours, object indices) → (poses (k, 7), found (k,))``: a global search for
-lost objects among the scene points no tracked object claims."""
+Support = Callable[[int, np.ndarray], float]
+"""``(object index, world pose (7,)) → share``: how far the frame supports the object there
+(:func:`evidence_at`'s share)."""
+Redetect = Callable[[np.ndarray, np.ndarray, list[int], Support], tuple[np.ndarray, np.ndarray]]
+"""``(points, colours, object indices, support) → (poses (k, 7), found (k,))``: a global search
+for lost objects among the scene points no tracked object claims."""
+
+
+def table_clearance(pts: np.ndarray, cols: np.ndarray, depth: np.ndarray, rays_z: np.ndarray,
+                    cfg: TrackerConfig) -> np.ndarray:
+    """Height above the table plane z = 0 below which each world point ``(N, 3)`` of colour
+    ``cols (N, 3)`` is table ``(N,)``: ``cfg.table_clearance_m``; for a point in the table's
+    colours, ``cfg.table_sigmas`` times the height noise of a table point there if more.
+
+    The points measured below the plane are table and noise alone (nothing is there). They
+    give the table's colours (chromaticity bins holding ``cfg.table_colour_share`` of them)
+    and the noise: a stereo camera's depth error grows with the squared depth ``depth (N,)``
+    along the pixel's ray (``rays_z``: the height change per metre of depth), so the height
+    noise is k·depth²·|rays_z|, and k is the frame's own (a half normal's median is
+    0.674 σ). From 1.8 m, a table seen from above is 1 cm thick, and a hand has its colour;
+    a 12 mm canvas lying on it keeps its points."""
+    out = np.full(len(pts), cfg.table_clearance_m)
+    below = pts[:, 2] < 0
+    if np.count_nonzero(below) < cfg.min_points:
+        return out
+    scale = depth**2 * np.abs(rays_z)
+    k = np.median(-pts[below, 2] / np.maximum(scale[below], 1e-9)) / 0.674
+    bins = np.floor(chromaticity(cols)[:, :2] / (cfg.colour_tolerance / 2)).astype(np.int64)
+    key = bins[:, 0] * 1000 + bins[:, 1]
+    seen, count = np.unique(key[below], return_counts=True)
+    table_like = np.isin(key, seen[count >= cfg.table_colour_share * count.sum()])
+    out[table_like] = np.maximum(out[table_like], cfg.table_sigmas * k * scale[table_like])
+    return out
 
 
 def scene_points(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
                  cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
-    """World points and colours of one frame, table removed."""
+    """World points and colours of one frame, table removed (:func:`table_clearance`)."""
     pts, cols = backproject(depth, rgb, K, T_world_cam, cfg.stride)
-    keep = pts[:, 2] > cfg.table_clearance_m
+    z_cam = (pts - T_world_cam[:3]) @ pose_to_matrix(T_world_cam)[:3, 2]  # depth along the optical axis
+    rays_z = (pts[:, 2] - T_world_cam[2]) / np.maximum(z_cam, 1e-9)
+    keep = pts[:, 2] > table_clearance(pts, cols, z_cam, rays_z, cfg)
     return pts[keep], cols[keep]
 
 
@@ -428,16 +482,16 @@ class FrameTracker:
 
     def _support(self, i: int, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, anchored: bool) -> float:
         """How far the frame supports object ``i`` at ``pose``: the explained share of its seen
-        surface (:func:`_evidence`); 0 for an object the end-effector may carry when the depth
+        surface (:func:`evidence_at`); 0 for an object the end-effector may carry when the depth
         image sees past much of it (ICP slides a long round handle along itself)."""
-        ev = _evidence(self.models[i], pose, rgb, depth, self.K, self.T_world_cam, self.cfg)
+        ev = evidence_at(self.models[i], pose, rgb, depth, self.K, self.T_world_cam, self.cfg)
         if i > 0 and not anchored and ev.seen_through > self.cfg.max_seen_through:
             return 0.0
         return ev.share
 
     def _look_again(self, i: int, pred: np.ndarray, pose_t: np.ndarray, status_t: np.ndarray, pts: np.ndarray,
                     cols: np.ndarray, owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
-                    share: float) -> tuple[np.ndarray, float, bool, float] | None:
+                    share: float, cfg: TrackerConfig) -> tuple[np.ndarray, float, bool, float] | None:
         """Moving object ``i``, lost or not explained at its prediction (``share``), searched
         for (:func:`_search`) from its grip on the end-effector if it is carried, its last pose
         moved on by the whole of its last motion, its last pose, and its colours' centre near
@@ -449,14 +503,14 @@ class FrameTracker:
             starts.append(self.prev[i])
         reach = self.models[i].radius + self.cfg.search_m * (1 + self.lost_for[i])  # further for each frame it was not found
         free = (owner < 0) | (owner == i)  # not another object's
-        centre = colour_centre(self.models[i], pts[free], cols[free], pred[i], reach, self.cfg)
+        centre = colour_centre(self.models[i], pts[free], cols[free], pred[i], reach, cfg)
         if centre is not None:
             starts.append(centre)
         carried = i > 0 and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0])
         if carried:
             starts.insert(0, compose(pose_t[0], self.grip[i]))
         found = _search(i, starts, pred, pts, cols, self.models, self.known,
-                        lambda p: self._support(i, p, rgb, depth, False), share, self.cfg)
+                        lambda p: self._support(i, p, rgb, depth, False), share, cfg)
         if found is None:
             return None
         pose, cost, start, share = found
@@ -473,20 +527,23 @@ class FrameTracker:
         pts, cols = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
         pred = predict(self.prev, self.dx, self.drot, self.cfg.damping)
         owner = assign_points(pts, cols, self.models, pred, self.cfg, self.known)
+        distance = np.linalg.norm(pred[:, :3] - self.T_world_cam[:3], axis=1)
         for i in np.flatnonzero(self.known):
-            sel = _owned(owner, i, self.cfg)
+            cfg = replace(self.cfg, min_points=min_points(self.models[i], distance[i], self.K[0, 0], self.cfg))
+            sel = _owned(owner, i, cfg)
             anchored = self.rest is not None and self.rest.anchored[i]  # a resting object has its own checks
-            if sel.size >= self.cfg.min_points:
+            if sel.size >= cfg.min_points:
                 measured[i] = True
                 pose, self.fitted[i], inliers, rmse, turned[i] = _register(self.models[i], pts[sel], cols[sel], pred[i],
-                                                                           self.fitted[i], self.cfg)
-                status_t[i] = _status(inliers, rmse, self.cfg)
+                                                                           self.fitted[i], cfg)
+                status_t[i] = _status(inliers, rmse, cfg)
             else:
                 pose, status_t[i] = pred[i], TrackStatus.LOST
             share = 0.0 if status_t[i] == TrackStatus.LOST else self._support(i, pose, rgb, depth, anchored)
             floor = float(np.fmax(self.cfg.min_explained, self.support_ref[i] - self.cfg.support_drop))
             if share < floor:
-                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth, share)
+                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth, share,
+                                                                  cfg)
                 if found is not None:
                     pose, self.fitted[i], turned[i], share = found
                     status_t[i], measured[i] = TrackStatus.OK, True
@@ -515,7 +572,8 @@ class FrameTracker:
         k = self.lost_for // self.cfg.redetect_after  # searches after 1, 2, 4, 8, … × redetect_after lost frames
         search = np.flatnonzero((self.lost_for % self.cfg.redetect_after == 0) & (k > 0) & ((k & (k - 1)) == 0))
         if self.redetect is not None and search.size:
-            found_poses, ok = self.redetect(pts[owner < 0], cols[owner < 0], search.tolist())
+            found_poses, ok = self.redetect(pts[owner < 0], cols[owner < 0], search.tolist(),
+                                            lambda i, p: self._support(i, p, rgb, depth, False))
             for i, p in zip(search[ok], found_poses[ok]):
                 pose_t[i], status_t[i], self.known[i], doubtful[i] = p, TrackStatus.SUSPECT, True, False
         good = (status_t != TrackStatus.LOST) & ~doubtful  # a pose to move on from

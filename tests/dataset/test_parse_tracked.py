@@ -88,7 +88,7 @@ def test_a_wrong_topic_is_a_clear_error_naming_the_file_and_the_topics(tasks, ca
 def test_an_object_lost_at_the_start_is_marked_lost_not_invented(tasks, camera_recordings, tmp_path):
     """With a demand of more points than any object has, every pose is marked lost."""
     out, _ = camera_recordings
-    _, tracking = parse(tasks["stacking-1"], out, tmp_path / "ds", cfg=TrackerConfig(min_points=10**6))
+    _, tracking = parse(tasks["stacking-1"], out, tmp_path / "ds", cfg=TrackerConfig(min_points=10**6, min_points_floor=10**6))
     assert tracking["lost_fraction"] == 1.0
 
 
