@@ -188,11 +188,11 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Surfa
     screenings: dict[tuple, list] = {}
     palettes = distinctive_palettes(task, models, cfg.colour_tolerance)
 
-    def needs(model: SurfaceModel, at: np.ndarray) -> TrackerConfig:
-        """``cfg`` with the fewest points that support ``model`` at ``at (3,)``."""
+    def need(model: SurfaceModel, at: np.ndarray) -> int:
+        """The fewest points that support ``model`` at ``at (3,)``."""
         if focal_px is None:
-            return cfg
-        return replace(cfg, min_points=min_points(model, float(np.linalg.norm(at - camera)), focal_px, cfg))
+            return cfg.min_points
+        return min_points(model, float(np.linalg.norm(at - camera)), focal_px, cfg)
     for i, (obj, model) in enumerate(zip(task.objects, models)):
         if only is not None and i not in only:
             continue
@@ -218,18 +218,20 @@ def initialize(task: Task, pts: np.ndarray, cols: np.ndarray, models: list[Surfa
                 shifts = AIR_SHIFTS if rest_height is None else _away(seen, camera, model.radius)
                 guesses = _guesses(seen, anchor, yaws, shifts, rest_height)
                 screenings[same] += [(score, fitted, g) for score, fitted in
-                                     _screen(model, guesses, pts, cols, coloured, reach, camera, screen, needs(model, seen))]
+                                     _screen(model, guesses, pts, cols, coloured, reach, camera, screen,
+                                             replace(cfg, min_points=need(model, seen)))]
         screened = [h for h in screenings[same] if h[2] not in used]
         best = (-np.inf, None, -1)
         for _, guess, g in sorted(screened, key=lambda h: -h[0])[:REFINED]:
             near = _near(pts, coloured, guess[:3], reach)
-            need = needs(model, guess[:3]).min_points
-            if len(near) >= need:
+            fewest = need(model, guess[:3])
+            if len(near) >= fewest:
                 score, fitted = _hypothesis(model, guess, pts, cols, near, camera, coarse, cfg)
                 share = 1.0 if support is None else support(i, _upright(fitted) if rest_height is not None else fitted)
-                if score >= need and share >= cfg.min_explained and score * share > best[0]:
+                # the agreement net of what is left unexplained, and the frame's support
+                if score >= fewest and share >= cfg.min_explained and score * share > best[0]:
                     best = (score * share, fitted, g)
-        if best[1] is not None:  # the agreement net of what is left unexplained
+        if best[1] is not None:
             resting = first_frame and i > 0 and obj.place.support != "air"
             poses[i], found[i] = _upright(best[1]) if resting else best[1], True
             used.add(best[2])

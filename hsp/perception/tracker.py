@@ -321,7 +321,7 @@ def _seen_past(model: SurfaceModel, pose: np.ndarray, depth: np.ndarray, K: np.n
 
 
 def evidence_at(model: SurfaceModel, pose: np.ndarray, rgb: np.ndarray, depth: np.ndarray, K: np.ndarray,
-              T_world_cam: np.ndarray, cfg: TrackerConfig) -> Evidence:
+                T_world_cam: np.ndarray, cfg: TrackerConfig) -> Evidence:
     """:func:`~hsp.perception.evidence.evidence` of ``model`` at world ``pose (7,)``."""
     return evidence(model.surface, model.normals, model.sample_rgb, pose_to_matrix(pose), rgb, depth, K, T_world_cam,
                     cfg.colour_tolerance)
@@ -542,8 +542,8 @@ class FrameTracker:
             share = 0.0 if status_t[i] == TrackStatus.LOST else self._support(i, pose, rgb, depth, anchored)
             floor = float(np.fmax(self.cfg.min_explained, self.support_ref[i] - self.cfg.support_drop))
             if share < floor:
-                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth, share,
-                                                                  cfg)
+                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth,
+                                                               share, cfg)
                 if found is not None:
                     pose, self.fitted[i], turned[i], share = found
                     status_t[i], measured[i] = TrackStatus.OK, True
