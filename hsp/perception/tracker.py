@@ -591,8 +591,9 @@ class FrameTracker:
                 pred[i] = compose(pose_t[0], self.grip[i])  # where the grasp holds it
             if sel.size >= cfg.min_points:
                 measured[i] = True
+                last = self.fitted[i] if anchored else 0.0  # only what rests may skip ICP: a turning wrench moves little
                 pose, self.fitted[i], inliers, rmse, turned[i] = _register(self.models[i], pts[sel], cols[sel], pred[i],
-                                                                           self.fitted[i], cfg)
+                                                                           last, cfg)
                 status_t[i] = _status(inliers, rmse, noise[i], cfg)
             else:
                 pose, status_t[i] = pred[i], TrackStatus.LOST
