@@ -114,7 +114,8 @@ class RestState:
         self.still_at = np.zeros((n, 3))
         self._count = np.zeros(n, int)  # measurements in the position average
         self._turns = np.zeros(n, int)  # and in the heading average, restarted after a hidden spell
-        self._edged = np.zeros(n, int)  # edge headings in it (then ICP's no longer count), restarted with it
+        self.edged = np.zeros(n, int)
+        """Edge headings averaged in each anchor's heading (then ICP's no longer count), 0 at its start."""
         self._seen = np.zeros(n, int)  # frames seen since anchored
         self._ee: np.ndarray | None = None  # the end-effector's pose at the last frame
         self._top = np.array([float(np.max(x[:, 2])) if len(x) else 0.0 for x in self.lowest])
@@ -131,7 +132,7 @@ class RestState:
                 self._anchor(i, poses[i, :3], upright(poses[i, 3:], axes)[0])
 
     def _anchor(self, i: int, x: np.ndarray, q_up: np.ndarray) -> None:
-        self.anchored[i], self._count[i], self._turns[i], self._edged[i], self.fresh[i] = True, 1, 1, 0, True
+        self.anchored[i], self._count[i], self._turns[i], self.edged[i], self.fresh[i] = True, 1, 1, 0, True
         self._seen[i] = 0
         self.anchor[i] = np.concatenate([x, q_up])
 
@@ -140,13 +141,13 @@ class RestState:
         (:mod:`hsp.perception.edges`) into it: the first replaces ICP's, weighted as a full
         average; later ones are averaged with it. The settled pose."""
         a = self.anchor[i]
-        turn = _heading_change(pose[3:], a[3:], self.periods[i]) if self._edged[i] else None
+        turn = _heading_change(pose[3:], a[3:], self.periods[i]) if self.edged[i] else None
         if turn is None:
-            a[:2], a[3:], self._edged[i] = pose[:2], pose[3:], 1
+            a[:2], a[3:], self.edged[i] = pose[:2], pose[3:], 1
         else:
-            self._edged[i] = min(self._edged[i] + 1, self.cfg.average_frames)
-            a[:2] += (pose[:2] - a[:2]) / self._edged[i]
-            a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._edged[i]]) * Rotation.from_quat(a[3:])).as_quat()
+            self.edged[i] = min(self.edged[i] + 1, self.cfg.average_frames)
+            a[:2] += (pose[:2] - a[:2]) / self.edged[i]
+            a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self.edged[i]]) * Rotation.from_quat(a[3:])).as_quat()
         self._count[i], self._turns[i], self.fresh[i] = self.cfg.average_frames, self.cfg.average_frames, False
         return self._settled(i)
 
@@ -170,12 +171,12 @@ class RestState:
             step[2] = 0.0  # pulled up by a block put on top of it
         a[:3] += step
         if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):  # turned (a nut by the wrench): a new heading
-            a[3:], self._turns[i], self._edged[i], self.fresh[i] = q_up, 1, 0, True
+            a[3:], self._turns[i], self.edged[i], self.fresh[i] = q_up, 1, 0, True
             return True
         self._seen[i] += 1
         self.fresh[i] |= (self._turns[i] == 0) | (self._seen[i] % self.cfg.edge_every == 0)  # seen again, or due
         self._turns[i] = min(self._turns[i] + 1, self.cfg.average_frames)
-        if not self._edged[i]:
+        if not self.edged[i]:
             a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._turns[i]]) * Rotation.from_quat(a[3:])).as_quat()
         return True
 
@@ -195,7 +196,7 @@ class RestState:
                 continue
             if self.anchored[i]:
                 if not measured[i]:  # hidden (a nut under the socket may be turned): heading to find again
-                    self._turns[i], self._edged[i] = 0, 0
+                    self._turns[i], self.edged[i] = 0, 0
                     if self.mounted[i] and self._on_axis(i, poses[0]):
                         self._turn_with_end_effector(i, poses[0])
                 out[i] = self._settled(i)

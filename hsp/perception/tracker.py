@@ -96,7 +96,11 @@ class TrackerConfig:
     """Share of an object's points whose colour a half-turned pose must explain better to
     replace ICP's (see :func:`unflip`)."""
     edges: EdgeConfig = EdgeConfig()
-    """Search of a resting object's heading and position on the image edges."""
+    """Search of a resting object's heading and position on the image edges ..."""
+    edges_again: EdgeConfig = EdgeConfig(max_turn_deg=4.0, turn_step_deg=1.0, shift_m=0.001, shift_step_m=0.001,
+                                         fine_rounds=0)
+    """... and when a settled one is looked for again (:class:`~hsp.perception.rest.RestConfig`'s
+    ``edge_every``): near it only, 81 poses (not 3,000: 0.1–0.2 s a nut)."""
     rest: RestConfig = RestConfig()
     """When an object is at rest, and how it is held there."""
     edge_tolerance: float = 0.1
@@ -627,8 +631,9 @@ class FrameTracker:
             look = np.flatnonzero(self.rest.fresh & self.rest.anchored & seen & (np.asarray(self.rest.periods) > 0))  # a heading to find
             gradient = image_gradient(rgb) if look.size else None
             for i in look:
+                cfg = replace(self.cfg, edges=self.cfg.edges_again) if self.rest.edged[i] else self.cfg
                 edged = settle_on_edges(self.models[i], pose_t[i], pts[owner == i], gradient, self.rest.periods[i], self.K,
-                                        self.T_world_cam, self.cfg)
+                                        self.T_world_cam, cfg)
                 if edged is not None:
                     pose_t[i], self.fitted[i] = self.rest.settle(i, edged[0]), edged[1]  # the solution to keep
                 self.rest.fresh[i] = False
