@@ -61,7 +61,7 @@ def first_frame_tracker(task: Task, rgb: np.ndarray, depth: np.ndarray, K: np.nd
     stream tracker that starts from it, re-detecting lost objects with the same estimator;
     feed it every frame from this one on."""
     camera = T_world_cam[:3]
-    pts, cols = scene_points(rgb, depth, K, T_world_cam, cfg)
+    pts, cols, _ = scene_points(rgb, depth, K, T_world_cam, cfg)
     first, found = initialize(task, pts, cols, models, camera, cfg, focal_px=K[0, 0],
                               support=lambda i, p: evidence_at(models[i], p, rgb, depth, K, T_world_cam, cfg).share)
 

@@ -45,6 +45,10 @@ class RestConfig:
     """A heading this far from the anchor's is a turn (a nut turned by the wrench), not noise."""
     average_frames: int = 30
     """Anchors average the last this many measurements or so (a running mean, then an EMA)."""
+    edge_every: int = 15
+    """A resting heading is looked for on the image edges when it starts and again every this
+    many frames it is seen; the edges' headings are averaged, and ICP's no longer count (a
+    nut's depth points fit best 2–5° off; one frame's edges sit 1–3° off, each way)."""
     refine_m: float = 0.003
     """Only measurements this close to the anchor's height refine it; horizontally, all that
     do not release it do."""
@@ -110,6 +114,9 @@ class RestState:
         self.still_at = np.zeros((n, 3))
         self._count = np.zeros(n, int)  # measurements in the position average
         self._turns = np.zeros(n, int)  # and in the heading average, restarted after a hidden spell
+        self.edged = np.zeros(n, int)
+        """Edge headings averaged in each anchor's heading (then ICP's no longer count), 0 at its start."""
+        self._seen = np.zeros(n, int)  # frames seen since anchored
         self._ee: np.ndarray | None = None  # the end-effector's pose at the last frame
         self._top = np.array([float(np.max(x[:, 2])) if len(x) else 0.0 for x in self.lowest])
         self.fresh = np.zeros(n, bool)
@@ -125,13 +132,22 @@ class RestState:
                 self._anchor(i, poses[i, :3], upright(poses[i, 3:], axes)[0])
 
     def _anchor(self, i: int, x: np.ndarray, q_up: np.ndarray) -> None:
-        self.anchored[i], self._count[i], self._turns[i], self.fresh[i] = True, 1, 1, True
+        self.anchored[i], self._count[i], self._turns[i], self.edged[i], self.fresh[i] = True, 1, 1, 0, True
+        self._seen[i] = 0
         self.anchor[i] = np.concatenate([x, q_up])
 
     def settle(self, i: int, pose: np.ndarray) -> np.ndarray:
-        """Replace anchor ``i``'s horizontal position and heading with a better estimate
-        than ICP's (:mod:`hsp.perception.edges`), weighted as a full average; the settled pose."""
-        self.anchor[i, :2], self.anchor[i, 3:] = pose[:2], pose[3:]
+        """Average a better estimate than ICP's of anchor ``i``'s horizontal position and heading
+        (:mod:`hsp.perception.edges`) into it: the first replaces ICP's, weighted as a full
+        average; later ones are averaged with it. The settled pose."""
+        a = self.anchor[i]
+        turn = _heading_change(pose[3:], a[3:], self.periods[i]) if self.edged[i] else None
+        if turn is None:
+            a[:2], a[3:], self.edged[i] = pose[:2], pose[3:], 1
+        else:
+            self.edged[i] = min(self.edged[i] + 1, self.cfg.average_frames)
+            a[:2] += (pose[:2] - a[:2]) / self.edged[i]
+            a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self.edged[i]]) * Rotation.from_quat(a[3:])).as_quat()
         self._count[i], self._turns[i], self.fresh[i] = self.cfg.average_frames, self.cfg.average_frames, False
         return self._settled(i)
 
@@ -155,11 +171,13 @@ class RestState:
             step[2] = 0.0  # pulled up by a block put on top of it
         a[:3] += step
         if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):  # turned (a nut by the wrench): a new heading
-            a[3:], self._turns[i], self.fresh[i] = q_up, 1, True
+            a[3:], self._turns[i], self.edged[i], self.fresh[i] = q_up, 1, 0, True
             return True
-        self.fresh[i] |= self._turns[i] == 0  # seen again after a hidden spell
+        self._seen[i] += 1
+        self.fresh[i] |= (self._turns[i] == 0) | (self._seen[i] % self.cfg.edge_every == 0)  # seen again, or due
         self._turns[i] = min(self._turns[i] + 1, self.cfg.average_frames)
-        a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._turns[i]]) * Rotation.from_quat(a[3:])).as_quat()
+        if not self.edged[i]:
+            a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._turns[i]]) * Rotation.from_quat(a[3:])).as_quat()
         return True
 
     def apply(self, poses: np.ndarray, measured: np.ndarray) -> np.ndarray:
@@ -178,7 +196,7 @@ class RestState:
                 continue
             if self.anchored[i]:
                 if not measured[i]:  # hidden (a nut under the socket may be turned): heading to find again
-                    self._turns[i] = 0
+                    self._turns[i], self.edged[i] = 0, 0
                     if self.mounted[i] and self._on_axis(i, poses[0]):
                         self._turn_with_end_effector(i, poses[0])
                 out[i] = self._settled(i)

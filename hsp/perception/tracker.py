@@ -11,9 +11,13 @@ A multicoloured object without symmetry is checked for half turns its shape cann
 apart. Objects at rest are settled on their support and held while hidden
 (:mod:`hsp.perception.rest`); when one comes to rest, its heading and position are taken
 from the image edges of its creases (:mod:`hsp.perception.edges`), which depth hardly
-fixes. Each pose is marked lost with too few supporting points and suspect with a loose
-fit; and it is ok only if the frame supports it (:mod:`hsp.perception.evidence`): enough
-of the object's seen surface lies at its depth in its colours, not much less than usual
+fixes. A carried object is predicted where its grasp holds it (the running mean of its
+pose in the end-effector's frame) and keeps the grasp's orientation while that explains the
+frame as well as its own fit: what a frame leaves free, a round handle's roll, stays put.
+Each pose is marked lost with too few supporting points and suspect with a fit looser
+than the frame's depth noise there allows (σ = k·z², k measured below the table); and it
+is ok only if the frame supports it (:mod:`hsp.perception.evidence`): enough of the
+object's seen surface lies at its depth in its colours, not much less than usual
 for that object, and, for an object the end-effector may carry, the depth image does not
 see past it. A moving object the frame does not support is looked for again, with wider
 ICP gates, from its grip if the end-effector carries it, from further along its way, from
@@ -72,6 +76,10 @@ class TrackerConfig:
     min_points_floor: int = 10
     """... but never fewer than this."""
     suspect_rmse_m: float = 0.004
+    """A fit is loose (suspect) if its inlier RMSE exceeds this ..."""
+    suspect_sigmas: float = 1.5
+    """... or this many times the frame's depth noise at the object (:func:`depth_noise`), if more:
+    a canvas 1.2 m away fits its pose to 4 mm, its points' noise."""
     model_points: int = 1500
     redetect_after: int = 5
     """Frames an object stays lost before a global search; the next ones come after 2, 4, 8, …
@@ -88,17 +96,31 @@ class TrackerConfig:
     """Share of an object's points whose colour a half-turned pose must explain better to
     replace ICP's (see :func:`unflip`)."""
     edges: EdgeConfig = EdgeConfig()
-    """Search of a resting object's heading and position on the image edges."""
+    """Search of a resting object's heading and position on the image edges ..."""
+    edges_again: EdgeConfig = EdgeConfig(max_turn_deg=4.0, turn_step_deg=1.0, shift_m=0.001, shift_step_m=0.001,
+                                         fine_rounds=0)
+    """... and when a settled one is looked for again (:class:`~hsp.perception.rest.RestConfig`'s
+    ``edge_every``): near it only, 81 poses (not 3,000: 0.1–0.2 s a nut)."""
     rest: RestConfig = RestConfig()
     """When an object is at rest, and how it is held there."""
     edge_tolerance: float = 0.1
     """The edges' pose is kept only if it fits the depth points within this fraction of
-    the fit cost where it started (a hand's edges next to a block must not pull it)."""
+    the fit cost where it started (a hand's edges next to a block must not pull it) ..."""
+    edge_noise: float = 3.0
+    """... or within this many times 6/N of it, if more: ICP's pose, fitted to N noisy points,
+    lies below the truth's cost by about 6/N of it (six degrees of freedom fitted; a nut's
+    44 points: 14 %, and 10° off was kept over the edges' 2°)."""
     max_seen_through: float = 0.15
     """A moving object whose camera-facing surface the depth image sees past on more than
     this share is not where its pose says: ICP slid it along itself (a brush dipped along
     its handle leaves half its old place filled). If the end-effector carries it, it is
     tried again from its grip; it is marked suspect if that does not fit either."""
+    grip_frames: int = 30
+    """A carried object's grip averages about this many frames (:func:`_grips`) ..."""
+    grip_margin: float = 0.05
+    """... and its orientation is the grip's (about the fit's centroid) while that explains
+    the frame (evidence share) within this of the fit's: a round handle's roll, which a frame's
+    correlated depth noise turns by 5–25°, stays where the grasp holds it."""
     carry_step_m: float = 0.003
     """An object that moves this far in a frame while keeping its pose relative to the
     end-effector (to a third of that) is carried by it, until it comes to rest."""
@@ -252,14 +274,16 @@ def settle_on_edges(model: SurfaceModel, pose: np.ndarray, points: np.ndarray, g
                     K: np.ndarray, T_world_cam: np.ndarray, cfg: TrackerConfig) -> tuple[np.ndarray, float] | None:
     """A resting object's ``pose (7,)`` turned and shifted onto the image edges of its creases
     (:func:`~hsp.perception.edges.refine_on_edges`) and the fit cost of its depth ``points
-    (N, 3)`` there; None when they fit that pose worse than ``cfg.edge_tolerance`` allows."""
+    (N, 3)`` there; None when they fit that pose worse than ``cfg.edge_tolerance`` and
+    ``cfg.edge_noise`` allow."""
     edged = refine_on_edges(gradient, model.creases, pose, period, K, T_world_cam, cfg.edges)
 
     def cost(p: np.ndarray) -> float:
         return _fit_cost(model, (points - p[:3]) @ pose_to_matrix(p)[:3, :3], cfg)
 
     c = cost(edged)
-    return (edged, c) if c <= (1 + cfg.edge_tolerance) * cost(pose) else None
+    tolerance = max(cfg.edge_tolerance, cfg.edge_noise * 6 / max(len(points), 1))
+    return (edged, c) if c <= (1 + tolerance) * cost(pose) else None
 
 
 def _register(model: SurfaceModel, points: np.ndarray, cols: np.ndarray, pred: np.ndarray, fitted: float,
@@ -287,14 +311,24 @@ def _register(model: SurfaceModel, points: np.ndarray, cols: np.ndarray, pred: n
     return pose, fitted, inliers, rmse, flip is not None
 
 
+def turned_to(model: SurfaceModel, pose: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """``pose (7,)`` turned to ``other``'s orientation about the model's centroid: where a
+    fit puts an object, as another estimate holds it."""
+    c = pose_to_matrix(pose)[:3, :3] @ model.centroid + pose[:3]
+    return np.concatenate([c - pose_to_matrix(other)[:3, :3] @ model.centroid, other[3:]])
+
+
 def _grips(poses: np.ndarray, ok: np.ndarray, prev: np.ndarray, in_hand: np.ndarray, grip: np.ndarray,
-           cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
+           held: np.ndarray, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the end-effector (object 0) carries, as grips (poses in its frame, ``(n, 7)``,
     NaN for none) updated with one frame's ``poses (n, 7)`` (``ok (n,)``; ``prev``: last
     frame's poses, ``in_hand``: last frame's poses in the end-effector's frame). An object
     that moved more than ``carry_step_m`` while its pose in the end-effector's frame changed
     by under a third of that moves with it: carried, until it comes to rest (the caller
-    drops its grip). A carried object's grip is kept while ICP slides it out of it."""
+    drops its grip). A grasp is rigid: the grip is the running mean of the frames' relative
+    poses (``held (n,)``: how many, up to ``cfg.grip_frames``; then an exponential mean), so
+    what one frame's fit leaves free (a round handle's roll) does not wander. A carried
+    object's grip is kept while ICP slides it out of it. Returns grips, relative poses, counts."""
     rel = np.full_like(in_hand, np.nan)
     if ok[0]:
         rel[ok] = relative(poses[ok], np.repeat(poses[:1], int(ok.sum()), axis=0))
@@ -302,9 +336,17 @@ def _grips(poses: np.ndarray, ok: np.ndarray, prev: np.ndarray, in_hand: np.ndar
     step = np.linalg.norm(poses[:, :3] - prev[:, :3], axis=1)
     with np.errstate(invalid="ignore"):
         together = (step > cfg.carry_step_m) & (np.linalg.norm(rel[:, :3] - in_hand[:, :3], axis=1) < step / 3)
-    grip = grip.copy()
-    grip[together] = rel[together]
-    return grip, rel
+    grip, held = grip.copy(), np.where(np.isnan(grip[:, 0]), 0, held)
+    held[together] = np.minimum(held[together] + 1, cfg.grip_frames)
+    i = np.flatnonzero(together)
+    if i.size:
+        w = 1.0 / held[i]
+        start = np.where(held[i, None] == 1, rel[i], grip[i])
+        R0 = Rotation.from_quat(start[:, 3:])
+        turn = (R0.inv() * Rotation.from_quat(rel[i, 3:])).as_rotvec()
+        grip[i, :3] = start[:, :3] + w[:, None] * (rel[i, :3] - start[:, :3])
+        grip[i, 3:] = (R0 * Rotation.from_rotvec(w[:, None] * turn)).as_quat()
+    return grip, rel, held
 
 
 def _owned(owner: np.ndarray, i: int, cfg: TrackerConfig) -> np.ndarray:
@@ -341,11 +383,11 @@ def colour_centre(model: SurfaceModel, pts: np.ndarray, cols: np.ndarray, pose: 
 
 def _search(i: int, starts: list[np.ndarray], pred: np.ndarray, pts: np.ndarray, cols: np.ndarray,
             models: list[SurfaceModel], known: np.ndarray, support: Callable[[np.ndarray], float], floor: float,
-            cfg: TrackerConfig) -> tuple[np.ndarray, float, int, float] | None:
+            noise_m: float, cfg: TrackerConfig) -> tuple[np.ndarray, float, int, float] | None:
     """Object ``i`` registered again from each of ``starts`` (poses ``(7,)``; the others'
     predictions ``pred`` decide which points are its), ICP with ``cfg.search_gates_m``: the
-    pose, fit cost, index and ``support`` of the start whose registration fits (status ok)
-    and the frame supports best, if above ``floor``."""
+    pose, fit cost, index and ``support`` of the start whose registration fits (status ok at
+    depth noise ``noise_m``) and the frame supports best, if above ``floor``."""
     best = None
     reach = models[i].radius + cfg.crop_margin_m + max(np.linalg.norm(p[:3] - pred[i, :3]) for p in starts)
     near = np.flatnonzero(np.sum((pts - pred[i, :3]) ** 2, axis=1) < reach**2)  # the points any start can own
@@ -357,7 +399,7 @@ def _search(i: int, starts: list[np.ndarray], pred: np.ndarray, pts: np.ndarray,
         if sel.size < cfg.min_points:
             continue
         pose, cost, inliers, rmse, _ = _register(models[i], pts[sel], cols[sel], start, 0.0, cfg, cfg.search_gates_m)
-        if _status(inliers, rmse, cfg) != TrackStatus.OK:
+        if _status(inliers, rmse, noise_m, cfg) != TrackStatus.OK:
             continue
         share = support(pose)
         if share > floor:
@@ -365,11 +407,12 @@ def _search(i: int, starts: list[np.ndarray], pred: np.ndarray, pts: np.ndarray,
     return best
 
 
-def _status(inliers: int, rmse: float, cfg: TrackerConfig) -> TrackStatus:
-    """Lost with too few supporting points, suspect with a loose fit, else ok."""
+def _status(inliers: int, rmse: float, noise_m: float, cfg: TrackerConfig) -> TrackStatus:
+    """Lost with too few supporting points, suspect with a fit looser than its points'
+    depth noise ``noise_m`` (σ) allows, else ok."""
     if inliers < cfg.min_points:
         return TrackStatus.LOST
-    return TrackStatus.SUSPECT if rmse > cfg.suspect_rmse_m else TrackStatus.OK
+    return TrackStatus.SUSPECT if rmse > max(cfg.suspect_rmse_m, cfg.suspect_sigmas * noise_m) else TrackStatus.OK
 
 
 def assign_points(pts: np.ndarray, cols: np.ndarray, models: list[SurfaceModel], pred: np.ndarray,
@@ -413,41 +456,52 @@ Redetect = Callable[[np.ndarray, np.ndarray, list[int], Support], tuple[np.ndarr
 for lost objects among the scene points no tracked object claims."""
 
 
-def table_clearance(pts: np.ndarray, cols: np.ndarray, depth: np.ndarray, rays_z: np.ndarray,
+def depth_noise(heights: np.ndarray, depth: np.ndarray, rays_z: np.ndarray, min_points: int) -> float:
+    """The frame's depth noise scale k (m⁻¹): a stereo camera's depth error σ grows with the
+    squared depth z along the pixel's ray, σ = k·z², from the points measured below the table
+    plane (table and noise alone; ``heights (N,)`` < 0), whose height error is σ·|``rays_z``|
+    (the height change per metre of depth); a half normal's median is 0.674 σ. NaN with
+    fewer than ``min_points`` such points."""
+    below = heights < 0
+    if np.count_nonzero(below) < min_points:
+        return float("nan")
+    return float(np.median(-heights[below] / np.maximum(depth[below] ** 2 * np.abs(rays_z[below]), 1e-9)) / 0.674)
+
+
+def table_clearance(pts: np.ndarray, cols: np.ndarray, depth: np.ndarray, rays_z: np.ndarray, k: float,
                     cfg: TrackerConfig) -> np.ndarray:
     """Height above the table plane z = 0 below which each world point ``(N, 3)`` of colour
     ``cols (N, 3)`` is table ``(N,)``: ``cfg.table_clearance_m``; for a point in the table's
-    colours, ``cfg.table_sigmas`` times the height noise of a table point there if more.
+    colours, ``cfg.table_sigmas`` times the height noise of a table point there if more:
+    k·depth²·|rays_z| (:func:`depth_noise`'s ``k``).
 
-    The points measured below the plane are table and noise alone (nothing is there). They
-    give the table's colours (chromaticity bins holding ``cfg.table_colour_share`` of them)
-    and the noise: a stereo camera's depth error grows with the squared depth ``depth (N,)``
-    along the pixel's ray (``rays_z``: the height change per metre of depth), so the height
-    noise is k·depth²·|rays_z|, and k is the frame's own (a half normal's median is
-    0.674 σ). From 1.8 m, a table seen from above is 1 cm thick, and a hand has its colour;
-    a 12 mm canvas lying on it keeps its points."""
+    The points measured below the plane are table and noise alone (nothing is there); they
+    give the table's colours (chromaticity bins holding ``cfg.table_colour_share`` of them).
+    From 1.8 m, a table seen from above is 1 cm thick, and a hand has its colour; a 12 mm
+    canvas lying on it keeps its points."""
     out = np.full(len(pts), cfg.table_clearance_m)
     below = pts[:, 2] < 0
-    if np.count_nonzero(below) < cfg.min_points:
+    if np.isnan(k):
         return out
-    scale = depth**2 * np.abs(rays_z)
-    k = np.median(-pts[below, 2] / np.maximum(scale[below], 1e-9)) / 0.674
     bins = np.floor(chromaticity(cols)[:, :2] / (cfg.colour_tolerance / 2)).astype(np.int64)
     key = bins[:, 0] * 1000 + bins[:, 1]
     seen, count = np.unique(key[below], return_counts=True)
     table_like = np.isin(key, seen[count >= cfg.table_colour_share * count.sum()])
-    out[table_like] = np.maximum(out[table_like], cfg.table_sigmas * k * scale[table_like])
+    noise = k * depth[table_like] ** 2 * np.abs(rays_z[table_like])
+    out[table_like] = np.maximum(out[table_like], cfg.table_sigmas * noise)
     return out
 
 
 def scene_points(rgb: np.ndarray, depth: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
-                 cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
-    """World points and colours of one frame, table removed (:func:`table_clearance`)."""
+                 cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray, float]:
+    """World points and colours of one frame, table removed (:func:`table_clearance`), and
+    the frame's depth noise scale k (:func:`depth_noise`)."""
     pts, cols = backproject(depth, rgb, K, T_world_cam, cfg.stride)
     z_cam = (pts - T_world_cam[:3]) @ pose_to_matrix(T_world_cam)[:3, 2]  # depth along the optical axis
     rays_z = (pts[:, 2] - T_world_cam[2]) / np.maximum(z_cam, 1e-9)
-    keep = pts[:, 2] > table_clearance(pts, cols, z_cam, rays_z, cfg)
-    return pts[keep], cols[keep]
+    k = depth_noise(pts[:, 2], z_cam, rays_z, cfg.min_points)
+    keep = pts[:, 2] > table_clearance(pts, cols, z_cam, rays_z, k, cfg)
+    return pts[keep], cols[keep], k
 
 
 class FrameTracker:
@@ -474,6 +528,7 @@ class FrameTracker:
         self.dx, self.drot = np.zeros((n, 3)), np.zeros((n, 3))
         self.fitted = np.zeros(n)  # fit cost at each object's last ICP solution
         self.grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
+        self.held = np.zeros(n, np.int64)  # frames each grip averages
         self.in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
         self.support_ref = np.full(n, np.nan)  # each object's usual support (TrackerConfig.support_drop)
         self.t = 0
@@ -491,7 +546,7 @@ class FrameTracker:
 
     def _look_again(self, i: int, pred: np.ndarray, pose_t: np.ndarray, status_t: np.ndarray, pts: np.ndarray,
                     cols: np.ndarray, owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
-                    share: float, cfg: TrackerConfig) -> tuple[np.ndarray, float, bool, float] | None:
+                    share: float, noise_m: float, cfg: TrackerConfig) -> tuple[np.ndarray, float, bool, float] | None:
         """Moving object ``i``, lost or not explained at its prediction (``share``), searched
         for (:func:`_search`) from its grip on the end-effector if it is carried, its last pose
         moved on by the whole of its last motion, its last pose, and its colours' centre near
@@ -510,7 +565,7 @@ class FrameTracker:
         if carried:
             starts.insert(0, compose(pose_t[0], self.grip[i]))
         found = _search(i, starts, pred, pts, cols, self.models, self.known,
-                        lambda p: self._support(i, p, rgb, depth, False), share, cfg)
+                        lambda p: self._support(i, p, rgb, depth, False), share, noise_m, cfg)
         if found is None:
             return None
         pose, cost, start, share = found
@@ -524,26 +579,33 @@ class FrameTracker:
         turned = np.zeros(n, bool)
         measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
         doubtful = np.zeros(n, bool)  # moving, and not found where the frame supports it
-        pts, cols = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
+        held = np.zeros(n, bool)  # the grasp's pose kept over the frame's own (fit)
+        fit = np.zeros((n, 7))
+        pts, cols, k = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
         pred = predict(self.prev, self.dx, self.drot, self.cfg.damping)
         owner = assign_points(pts, cols, self.models, pred, self.cfg, self.known)
         distance = np.linalg.norm(pred[:, :3] - self.T_world_cam[:3], axis=1)
+        noise = np.nan_to_num(k * ((pred[:, :3] - self.T_world_cam[:3]) @ pose_to_matrix(self.T_world_cam)[:3, 2]) ** 2)
         for i in np.flatnonzero(self.known):
             cfg = replace(self.cfg, min_points=min_points(self.models[i], distance[i], self.K[0, 0], self.cfg))
             sel = _owned(owner, i, cfg)
             anchored = self.rest is not None and self.rest.anchored[i]  # a resting object has its own checks
+            carried = i > 0 and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0])
+            if carried:
+                pred[i] = compose(pose_t[0], self.grip[i])  # where the grasp holds it
             if sel.size >= cfg.min_points:
                 measured[i] = True
+                last = self.fitted[i] if anchored else 0.0  # only what rests may skip ICP: a turning wrench moves little
                 pose, self.fitted[i], inliers, rmse, turned[i] = _register(self.models[i], pts[sel], cols[sel], pred[i],
-                                                                           self.fitted[i], cfg)
-                status_t[i] = _status(inliers, rmse, cfg)
+                                                                           last, cfg)
+                status_t[i] = _status(inliers, rmse, noise[i], cfg)
             else:
                 pose, status_t[i] = pred[i], TrackStatus.LOST
             share = 0.0 if status_t[i] == TrackStatus.LOST else self._support(i, pose, rgb, depth, anchored)
             floor = float(np.fmax(self.cfg.min_explained, self.support_ref[i] - self.cfg.support_drop))
             if share < floor:
                 found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth,
-                                                               share, cfg)
+                                                               share, noise[i], cfg)
                 if found is not None:
                     pose, self.fitted[i], turned[i], share = found
                     status_t[i], measured[i] = TrackStatus.OK, True
@@ -556,6 +618,11 @@ class FrameTracker:
             if measured[i]:  # raised at once by a better supported frame, lowered slowly by worse ones
                 r = self.support_ref[i]
                 self.support_ref[i] = np.fmax(share, r + self.cfg.support_rate * (share - r))
+            if carried and status_t[i] == TrackStatus.OK:
+                grasped = turned_to(self.models[i], pose, pred[i])
+                if self._support(i, grasped, rgb, depth, False) >= share - self.cfg.grip_margin:
+                    held[i], fit[i] = True, pose
+                    pose = grasped  # the grasp explains the frame as well: what one fit leaves free stays put
             pose_t[i] = pose
         pose_t[~self.known], status_t[~self.known] = self.prev[~self.known], TrackStatus.LOST
         if self.rest is not None:
@@ -564,8 +631,9 @@ class FrameTracker:
             look = np.flatnonzero(self.rest.fresh & self.rest.anchored & seen & (np.asarray(self.rest.periods) > 0))  # a heading to find
             gradient = image_gradient(rgb) if look.size else None
             for i in look:
+                cfg = replace(self.cfg, edges=self.cfg.edges_again) if self.rest.edged[i] else self.cfg
                 edged = settle_on_edges(self.models[i], pose_t[i], pts[owner == i], gradient, self.rest.periods[i], self.K,
-                                        self.T_world_cam, self.cfg)
+                                        self.T_world_cam, cfg)
                 if edged is not None:
                     pose_t[i], self.fitted[i] = self.rest.settle(i, edged[0]), edged[1]  # the solution to keep
                 self.rest.fresh[i] = False
@@ -577,7 +645,9 @@ class FrameTracker:
             for i, p in zip(search[ok], found_poses[ok]):
                 pose_t[i], status_t[i], self.known[i], doubtful[i] = p, TrackStatus.SUSPECT, True, False
         good = (status_t != TrackStatus.LOST) & ~doubtful  # a pose to move on from
-        self.grip, self.in_hand = _grips(pose_t, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip, self.cfg)
+        fit = np.where(held[:, None], fit, pose_t)  # the grip learns from the frame's own poses
+        self.grip, self.in_hand, self.held = _grips(fit, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip,
+                                                    self.held, self.cfg)
         if self.rest is not None:
             self.grip[self.rest.anchored] = np.nan  # put down
         if self.t > 0:

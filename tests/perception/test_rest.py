@@ -73,6 +73,26 @@ def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
     assert not rest.anchored[1] and not rest.fresh[1], "released: nothing to settle"
 
 
+def test_a_settled_heading_is_the_mean_of_the_edges_and_is_looked_for_again():
+    """Once the edges have given a resting nut's heading, ICP's (3° off, every frame, as a
+    nut's depth points fit) no longer moves it; the edges are asked again every
+    ``edge_every`` frames it is seen, and their headings (here 2° each way) are averaged."""
+    cfg = RestConfig(rest_frames=3, edge_every=5)
+    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg)
+    hand, icp = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, np.radians(3)])
+    rest.start(np.stack([hand, icp]), np.array([True, True]))
+    rest.settle(1, _pose([0.5, 0.1, 0.02], [0, 0, np.radians(2)]))
+    due = []
+    for t in range(200):
+        rest.apply(np.stack([hand, icp]), np.array([True, True]))
+        if rest.fresh[1]:
+            due.append(t)
+            rest.settle(1, _pose([0.5, 0.1, 0.02], [0, 0, np.radians(2 if len(due) % 2 == 0 else -2)]))
+    heading = np.degrees(Rotation.from_quat(rest.anchor[1, 3:]).as_rotvec()[2])
+    assert np.diff(due).tolist() == [cfg.edge_every] * (len(due) - 1) and len(due) == 200 // cfg.edge_every
+    assert abs(heading) < 0.3, heading
+
+
 def test_a_mounted_object_turns_but_never_tilts_even_when_released():
     rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3), mounted=[False, True])
     hand, nut = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.2])

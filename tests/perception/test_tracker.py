@@ -9,7 +9,7 @@ from hsp.perception.episode import first_frame_tracker, object_models, rest_stat
 from hsp.perception.initialize import initialize
 from hsp.perception.metrics import rotation_error_deg
 from hsp.perception.pointcloud import backproject, project
-from hsp.perception.tracker import SurfaceModel, TrackerConfig, min_points, table_clearance, track
+from hsp.perception.tracker import SurfaceModel, TrackerConfig, depth_noise, min_points, table_clearance, track
 from hsp.recording.ground_truth import read_ground_truth
 from hsp.recording.reader import read_recording
 from hsp.recording.record import RecordConfig, record
@@ -86,19 +86,42 @@ def painting(tasks, tmp_path_factory):
     return tasks["painting"], *_recorded(tasks["painting"], 13, tmp_path_factory)
 
 
-def test_a_held_brush_follows_the_hand_where_icp_would_slide_it_along_its_handle(painting):
-    """The brush is a long round handle: moved along it (dipped, stroked), ICP finds the same
-    fit where it was. The depth image then sees past half of it; the tracker tries again from
-    where the hand carried it. (Before, this recording's brush p95 was 48 mm, with 13 frames
-    2–10 cm off marked ok.)"""
+@pytest.fixture(scope="module")
+def painting_tracked(painting):
+    """The painting recording tracked from its true first poses: task, truth, poses, status."""
     task, rec, gt = painting
     models = object_models(task, TrackerConfig(), 0)
     poses, status = track(rec.rgb, rec.depth, rec.K, rec.T_world_cam, models, gt.poses[0], TrackerConfig(),
                           rest=rest_state(task, models))
+    return task, gt, poses, status
+
+
+def test_a_held_brush_follows_the_hand_where_icp_would_slide_it_along_its_handle(painting_tracked):
+    """The brush is a long round handle: moved along it (dipped, stroked), ICP finds the same
+    fit where it was. The depth image then sees past half of it; the tracker tries again from
+    where the hand carried it. (Before, this recording's brush p95 was 48 mm, with 13 frames
+    2–10 cm off marked ok.)"""
+    task, gt, poses, status = painting_tracked
     brush = task.names.index("brush")
     err_mm = np.linalg.norm(poses[:, brush, :3] - gt.poses[:, brush, :3], axis=1) * 1000
     assert np.percentile(err_mm, 95) < 10.0, np.percentile(err_mm, [50, 95, 100])
     assert np.mean((err_mm > 20.0) & (status[:, brush] == TrackStatus.OK)) < 0.03
+
+
+def test_a_held_brush_keeps_the_roll_of_its_grasp_and_what_fits_to_its_noise_is_ok(painting_tracked):
+    """A frame's correlated depth noise turns the brush's head about its round handle by
+    5–25°; held by the hand, it keeps the roll of its grasp (session 36: 40 % of this
+    recording's frames more than 15° off, up to 90°; now at most 12°). The canvas and the bucket, 1.2 m from the
+    camera, fit their points to the depth noise there, 3–4 mm: accurate, they are ok (they
+    were suspect in 100 % and 85 % of the frames: a fixed 4 mm)."""
+    task, gt, poses, status = painting_tracked
+    brush = task.names.index("brush")
+    roll = rotation_error_deg(poses[:, brush, 3:], gt.poses[:, brush, 3:], task.objects[brush].symmetry)
+    assert np.mean(roll > 15.0) < 0.02 and np.median(roll) < 5.0, np.percentile(roll, [50, 90, 100])
+    for name in ("canvas", "bucket"):
+        i = task.names.index(name)
+        err_mm = np.linalg.norm(poses[:, i, :3] - gt.poses[:, i, :3], axis=1) * 1000
+        assert err_mm.max() < 10.0 and np.mean(status[:, i] == TrackStatus.OK) > 0.95, name
 
 
 def test_a_demonstrator_twice_as_fast_is_followed_and_its_status_can_be_trusted(episode):
@@ -133,7 +156,10 @@ def test_the_table_is_as_thick_as_its_depth_noise_in_its_own_colours():
     hand = np.c_[rng.uniform(0, 1, (500, 2)), np.full(500, 0.05)]
     pts = np.concatenate([table, canvas, hand])
     cols = np.concatenate([np.tile(brown, (n, 1)), np.tile(white, (500, 1)), np.tile(brown * 1.2, (500, 1))])
-    clear = table_clearance(pts, cols, np.r_[depth, np.full(1000, 1.8)], np.r_[rays_z, np.full(1000, -0.6)], cfg)
+    depth, rays_z = np.r_[depth, np.full(1000, 1.8)], np.r_[rays_z, np.full(1000, -0.6)]
+    k = depth_noise(pts[:, 2], depth, rays_z, cfg.min_points)
+    assert k == pytest.approx(0.0025, rel=0.05), "the noise scale, from the points below the plane"
+    clear = table_clearance(pts, cols, depth, rays_z, k, cfg)
     kept = pts[:, 2] > clear
     assert kept[:n].mean() < 0.005, "table noise left as points"
     assert (pts[:n, 2] > cfg.table_clearance_m).mean() > 0.1, "a fixed clearance keeps much of it"
@@ -163,3 +189,4 @@ def test_from_high_above_the_hand_is_found_among_a_table_of_its_colour(painting)
     tracker = first_frame_tracker(task, rgb, depth, cam.K, T_world_cam, models)
     err_mm = np.linalg.norm(tracker.prev[:, :3] - gt.poses[0, :, :3], axis=1) * 1000
     assert tracker.known.all() and (err_mm < 6.0).all(), err_mm
+
