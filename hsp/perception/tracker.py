@@ -319,14 +319,14 @@ def turned_to(model: SurfaceModel, pose: np.ndarray, other: np.ndarray) -> np.nd
 
 
 def _grips(poses: np.ndarray, ok: np.ndarray, prev: np.ndarray, in_hand: np.ndarray, grip: np.ndarray,
-           held: np.ndarray, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+           count: np.ndarray, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the end-effector (object 0) carries, as grips (poses in its frame, ``(n, 7)``,
     NaN for none) updated with one frame's ``poses (n, 7)`` (``ok (n,)``; ``prev``: last
     frame's poses, ``in_hand``: last frame's poses in the end-effector's frame). An object
     that moved more than ``carry_step_m`` while its pose in the end-effector's frame changed
     by under a third of that moves with it: carried, until it comes to rest (the caller
     drops its grip). A grasp is rigid: the grip is the running mean of the frames' relative
-    poses (``held (n,)``: how many, up to ``cfg.grip_frames``; then an exponential mean), so
+    poses (``count (n,)``: how many, up to ``cfg.grip_frames``; then an exponential mean), so
     what one frame's fit leaves free (a round handle's roll) does not wander. A carried
     object's grip is kept while ICP slides it out of it. Returns grips, relative poses, counts."""
     rel = np.full_like(in_hand, np.nan)
@@ -336,17 +336,17 @@ def _grips(poses: np.ndarray, ok: np.ndarray, prev: np.ndarray, in_hand: np.ndar
     step = np.linalg.norm(poses[:, :3] - prev[:, :3], axis=1)
     with np.errstate(invalid="ignore"):
         together = (step > cfg.carry_step_m) & (np.linalg.norm(rel[:, :3] - in_hand[:, :3], axis=1) < step / 3)
-    grip, held = grip.copy(), np.where(np.isnan(grip[:, 0]), 0, held)
-    held[together] = np.minimum(held[together] + 1, cfg.grip_frames)
+    grip, count = grip.copy(), np.where(np.isnan(grip[:, 0]), 0, count)
+    count[together] = np.minimum(count[together] + 1, cfg.grip_frames)
     i = np.flatnonzero(together)
     if i.size:
-        w = 1.0 / held[i]
-        start = np.where(held[i, None] == 1, rel[i], grip[i])
+        w = 1.0 / count[i]
+        start = np.where(count[i, None] == 1, rel[i], grip[i])
         R0 = Rotation.from_quat(start[:, 3:])
         turn = (R0.inv() * Rotation.from_quat(rel[i, 3:])).as_rotvec()
         grip[i, :3] = start[:, :3] + w[:, None] * (rel[i, :3] - start[:, :3])
         grip[i, 3:] = (R0 * Rotation.from_rotvec(w[:, None] * turn)).as_quat()
-    return grip, rel, held
+    return grip, rel, count
 
 
 def _owned(owner: np.ndarray, i: int, cfg: TrackerConfig) -> np.ndarray:
@@ -528,7 +528,7 @@ class FrameTracker:
         self.dx, self.drot = np.zeros((n, 3)), np.zeros((n, 3))
         self.fitted = np.zeros(n)  # fit cost at each object's last ICP solution
         self.grip = np.full((n, 7), np.nan)  # pose in the end-effector's frame of what it carries (NaN: nothing)
-        self.held = np.zeros(n, np.int64)  # frames each grip averages
+        self.grip_count = np.zeros(n, np.int64)  # frames each grip averages
         self.in_hand = np.full((n, 7), np.nan)  # every object's pose in the end-effector's frame, last frame
         self.support_ref = np.full(n, np.nan)  # each object's usual support (TrackerConfig.support_drop)
         self.t = 0
@@ -544,14 +544,14 @@ class FrameTracker:
             return 0.0
         return ev.share
 
-    def _look_again(self, i: int, pred: np.ndarray, pose_t: np.ndarray, status_t: np.ndarray, pts: np.ndarray,
-                    cols: np.ndarray, owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray,
-                    share: float, noise_m: float, cfg: TrackerConfig) -> tuple[np.ndarray, float, bool, float] | None:
+    def _look_again(self, i: int, pred: np.ndarray, carried: bool, pts: np.ndarray, cols: np.ndarray,
+                    owner: np.ndarray, rgb: np.ndarray, depth: np.ndarray, share: float, noise_m: float,
+                    cfg: TrackerConfig) -> tuple[np.ndarray, float, bool, float] | None:
         """Moving object ``i``, lost or not explained at its prediction (``share``), searched
-        for (:func:`_search`) from its grip on the end-effector if it is carried, its last pose
-        moved on by the whole of its last motion, its last pose, and its colours' centre near
-        the prediction: pose, fit cost, whether it is a correction (the grip), not motion, and
-        its support."""
+        for (:func:`_search`) from its grip on the end-effector if it is ``carried`` (then that
+        is its prediction ``pred[i]``), its last pose moved on by the whole of its last motion,
+        its last pose, and its colours' centre near the prediction: pose, fit cost, whether it
+        is a correction (the grip), not motion, and its support."""
         ahead = 1.0 + self.lost_for[i]  # frames since its last pose to move on from
         starts = [predict(self.prev[i:i + 1], ahead * self.dx[i:i + 1], ahead * self.drot[i:i + 1], 1.0)[0]]
         if self.dx[i].any() or self.drot[i].any():  # else that is the last pose already
@@ -561,9 +561,8 @@ class FrameTracker:
         centre = colour_centre(self.models[i], pts[free], cols[free], pred[i], reach, cfg)
         if centre is not None:
             starts.append(centre)
-        carried = i > 0 and status_t[0] != TrackStatus.LOST and not np.isnan(self.grip[i, 0])
         if carried:
-            starts.insert(0, compose(pose_t[0], self.grip[i]))
+            starts.insert(0, pred[i])
         found = _search(i, starts, pred, pts, cols, self.models, self.known,
                         lambda p: self._support(i, p, rgb, depth, False), share, noise_m, cfg)
         if found is None:
@@ -579,7 +578,7 @@ class FrameTracker:
         turned = np.zeros(n, bool)
         measured = np.zeros(n, bool)  # ICP saw it (not held unseen, not lost)
         doubtful = np.zeros(n, bool)  # moving, and not found where the frame supports it
-        held = np.zeros(n, bool)  # the grasp's pose kept over the frame's own (fit)
+        by_grip = np.zeros(n, bool)  # the grasp's pose kept over the frame's own (fit)
         fit = np.zeros((n, 7))
         pts, cols, k = scene_points(rgb, depth, self.K, self.T_world_cam, self.cfg)
         pred = predict(self.prev, self.dx, self.drot, self.cfg.damping)
@@ -604,8 +603,8 @@ class FrameTracker:
             share = 0.0 if status_t[i] == TrackStatus.LOST else self._support(i, pose, rgb, depth, anchored)
             floor = float(np.fmax(self.cfg.min_explained, self.support_ref[i] - self.cfg.support_drop))
             if share < floor:
-                found = None if anchored else self._look_again(i, pred, pose_t, status_t, pts, cols, owner, rgb, depth,
-                                                               share, noise[i], cfg)
+                found = None if anchored else self._look_again(i, pred, carried, pts, cols, owner, rgb, depth, share,
+                                                               noise[i], cfg)
                 if found is not None:
                     pose, self.fitted[i], turned[i], share = found
                     status_t[i], measured[i] = TrackStatus.OK, True
@@ -621,7 +620,7 @@ class FrameTracker:
             if carried and status_t[i] == TrackStatus.OK:
                 grasped = turned_to(self.models[i], pose, pred[i])
                 if self._support(i, grasped, rgb, depth, False) >= share - self.cfg.grip_margin:
-                    held[i], fit[i] = True, pose
+                    by_grip[i], fit[i] = True, pose
                     pose = grasped  # the grasp explains the frame as well: what one fit leaves free stays put
             pose_t[i] = pose
         pose_t[~self.known], status_t[~self.known] = self.prev[~self.known], TrackStatus.LOST
@@ -645,9 +644,9 @@ class FrameTracker:
             for i, p in zip(search[ok], found_poses[ok]):
                 pose_t[i], status_t[i], self.known[i], doubtful[i] = p, TrackStatus.SUSPECT, True, False
         good = (status_t != TrackStatus.LOST) & ~doubtful  # a pose to move on from
-        fit = np.where(held[:, None], fit, pose_t)  # the grip learns from the frame's own poses
-        self.grip, self.in_hand, self.held = _grips(fit, status_t == TrackStatus.OK, self.prev, self.in_hand, self.grip,
-                                                    self.held, self.cfg)
+        fit = np.where(by_grip[:, None], fit, pose_t)  # the grip learns from the frame's own poses
+        self.grip, self.in_hand, self.grip_count = _grips(fit, status_t == TrackStatus.OK, self.prev, self.in_hand,
+                                                          self.grip, self.grip_count, self.cfg)
         if self.rest is not None:
             self.grip[self.rest.anchored] = np.nan  # put down
         if self.t > 0:
