@@ -110,10 +110,6 @@ def _write_report(path: Path, report: dict, output: Path) -> None:
     log.info("wrote %s and %s in %.1f s", output, path, report["seconds"])
 
 
-def _not_available(stage: str, issue: int) -> None:
-    _fail(HspError(f"`hsp {stage}` is not available yet (issue {issue})"))
-
-
 def _intrinsics(text: Optional[str]) -> Optional[tuple[float, float, float, float]]:
     if text is None:
         return None
@@ -324,10 +320,26 @@ def evaluate(
         _fail(e)
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def report() -> None:
-    """Write reports/summary.md and plots (not available yet)."""
-    _not_available("report", 9)
+@app.command()
+def report(
+    reports: Path = typer.Option(Path("reports"), help="reports directory the stages wrote"),
+    experiments: bool = typer.Option(True, help="add the DVC experiments' results to the curves"),
+    params_file: Optional[Path] = PARAMS_OPTION,
+) -> None:
+    """Write reports/summary.md (the paper's Table I beside ours, tracking and labelling
+    figures, the configuration) and reports/plots/ (Figure 4's points) from the stages' reports."""
+    import time
+
+    from hsp.reporting.summary import experiment_rows, write_report
+    from hsp.tasks.registry import list_tasks
+
+    try:
+        t0 = time.perf_counter()
+        rows = experiment_rows(Path.cwd()) if experiments else []
+        out = write_report(reports, list_tasks(), load_params(params_file), rows)
+        log.info("wrote %s and %d plots in %.1f s", reports / "summary.md", len(out["plots"]), time.perf_counter() - t0)
+    except HspError as e:
+        _fail(e)
 
 
 @app.command()
