@@ -194,6 +194,24 @@ def stage_table(reports: Path, tasks: list[str], name: str) -> str:
     return "\n".join(rows)
 
 
+def stage_minutes(reports: Path, tasks: list[str]) -> str:
+    """Markdown: where the pipeline's time went, per task and stage (minutes, from each
+    report's ``seconds``: as measured when the stage last ran); training and evaluation
+    summed over the methods found."""
+    rows = ["| task | record | parse | label | train (methods) | eval (methods) | total |", "|---|---|---|---|---|---|---|"]
+    for t in tasks:
+        single = [(_read(reports / t / name) or {}).get("seconds") for name in ("record.json", "parse.json", "labels.json")]
+        per_method = [[(_read(reports / t / m / name) or {}).get("seconds") for m in METHODS] for name in ("train.json",
+                                                                                                     "eval.json")]
+        cells = ["—" if x is None else f"{x / 60:.0f}" for x in single]
+        for xs in per_method:
+            found = [x for x in xs if x is not None]
+            cells.append(f"{sum(found) / 60:.0f} ({len(found)})" if found else "—")
+        total = sum(x for x in single if x is not None) + sum(x for xs in per_method for x in xs if x is not None)
+        rows.append(f"| {t} | " + " | ".join(cells) + f" | {total / 60:.0f} |")
+    return "\n".join(rows)
+
+
 def write_curves(results: list[Result], plots: Path) -> list[Path]:
     """Figure 4's data in the new directory ``plots``: ``demonstrations.csv`` (one row per task, method and number of
     demonstrations; what ``dvc plots show`` draws) and, per task, a PNG of success rate
@@ -261,6 +279,8 @@ def summary_markdown(reports: Path, tasks: list[str], results: list[Result], cur
         stage_table(reports, tasks, "tracking.json"),
         "## Pseudo-labels (`hsp label`, against the demonstrator's annotation: a diagnostic)",
         stage_table(reports, tasks, "labels.json"),
+        "## Where the time went (minutes, each stage as it last ran)",
+        stage_minutes(reports, tasks),
         "## Configuration",
         "```yaml\n" + _yaml(params) + "```",
     ]) + "\n"

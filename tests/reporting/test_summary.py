@@ -46,6 +46,7 @@ def test_the_summary_holds_table_curves_tracking_and_configuration(reports):
     assert "0.968 [0.938, 0.984]" in text and "![stacking-1](plots/stacking-1.png)" in text
     assert "| stacking-1 | 0.0009 |" not in text and "2.16" in text  # tracking figures, columns in order
     assert "| painting | not run |" in text and "seed: 7" in text
+    assert "| stacking-1 | — | — | — | 3 (1) | 2 (2) | 5 |" in text  # minutes: train 174 s, eval 2 × 60 s
     assert sorted(p.rsplit("/", 1)[1] for p in out["plots"]) == ["demonstrations.csv", "stacking-1.png"]
     assert (reports / "plots" / "stacking-1.png").read_bytes()[:4] == b"\x89PNG"
 
