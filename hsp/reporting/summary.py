@@ -120,12 +120,17 @@ def from_experiments(rows: list[dict], tasks: list[str]) -> list[Result]:
 def experiment_rows(repo: Path) -> list[dict]:
     """:func:`dvc.api.exp_show` of the DVC project at ``repo``: the experiments run from its
     current commit (what ``dvc exp run --queue`` made of this configuration); none outside a
-    DVC project."""
+    DVC project, or in one without Git (``dvc init --no-scm``: no experiments)."""
     if not (repo / ".dvc").is_dir():
         return []
     import dvc.api
+    from dvc.scm import SCMError
 
-    return dvc.api.exp_show(repo=str(repo))
+    try:
+        return dvc.api.exp_show(repo=str(repo))
+    except SCMError as e:
+        log.info("report: no DVC experiments (%s)", str(e).splitlines()[0])
+        return []
 
 
 def merged(workspace: list[Result], experiments: list[Result]) -> list[Result]:
