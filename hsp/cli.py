@@ -89,7 +89,7 @@ def record(
             seed=seed if seed is not None else int(param(params, "seed", 0)),
             fps=fps if fps is not None else int(param(params, "record.fps", 15)),
             workers=workers if workers is not None else int(param(params, "record.workers", 2)),
-            rig=camera_rig(params) if use_camera else None,
+            rig=camera_rig(params) if use_camera else None, scale=_scale(params),
         )
         out_dir = out or Path("data/recordings") / task
         log.info("record %s: read %s; %d episodes, seed %d, %d fps, camera %s", task, t.path, cfg.episodes, cfg.seed,
@@ -110,8 +110,11 @@ def _write_report(path: Path, report: dict, output: Path) -> None:
     log.info("wrote %s and %s in %.1f s", output, path, report["seconds"])
 
 
-def _not_available(stage: str, issue: int) -> None:
-    _fail(HspError(f"`hsp {stage}` is not available yet (issue {issue})"))
+def _scale(params: dict):
+    """Where the parallel map over episodes runs: ``params.yaml: parallel`` (local processes or Ray)."""
+    from hsp.parallel import ScaleOut
+
+    return section(params, "parallel", ScaleOut)
 
 
 def _intrinsics(text: Optional[str]) -> Optional[tuple[float, float, float, float]]:
@@ -175,7 +178,7 @@ def parse(
         table = section(params, "parse.table", TableConfig)
         log.info("parse %s: read %s (poses from %s, %d workers)", task, rec_dir, poses_from, n_workers)
         report, tracking = parse_recordings(t, rec_dir, out_dir, poses_from, n_workers, options, cfg,
-                                            int(param(params, "seed", 0)), table, skip_bad)
+                                            int(param(params, "seed", 0)), table, skip_bad, _scale(params))
         if tracking is not None:
             from hsp.fileio import write_json
 
@@ -316,7 +319,7 @@ def evaluate(
             videos=int(pick(videos, "eval.videos", 1)),
             recorded_episodes=int(param(params, f"record.episodes.{task}", 0)),
             env=env_config(params, task),
-            rig=camera_rig(params), tracker=section(params, "tracker", TrackerConfig),
+            rig=camera_rig(params), tracker=section(params, "tracker", TrackerConfig), scale=_scale(params),
         )
         model_dir = None if method == "oracle" else (model or Path("data/models") / task / method)
         run_evaluation(t, method, observer, model_dir, cfg, out or Path("reports") / task / method)
@@ -324,10 +327,26 @@ def evaluate(
         _fail(e)
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
-def report() -> None:
-    """Write reports/summary.md and plots (not available yet)."""
-    _not_available("report", 9)
+@app.command()
+def report(
+    reports: Path = typer.Option(Path("reports"), help="reports directory the stages wrote"),
+    experiments: bool = typer.Option(True, help="add the DVC experiments' results to the curves"),
+    params_file: Optional[Path] = PARAMS_OPTION,
+) -> None:
+    """Write reports/summary.md (the paper's Table I beside ours, tracking and labelling
+    figures, the configuration) and reports/plots/ (Figure 4's points) from the stages' reports."""
+    import time
+
+    from hsp.reporting.summary import experiment_rows, write_report
+    from hsp.tasks.registry import list_tasks
+
+    try:
+        t0 = time.perf_counter()
+        rows = experiment_rows(Path.cwd()) if experiments else []
+        out = write_report(reports, list_tasks(), load_params(params_file), rows)
+        log.info("wrote %s and %d plots in %.1f s", reports / "summary.md", len(out["plots"]), time.perf_counter() - t0)
+    except HspError as e:
+        _fail(e)
 
 
 @app.command()

@@ -1,16 +1,44 @@
-"""Worker processes for Open3D work (tracking): one thread each, on a core of its own.
+"""The parallel map over episodes (record, parse, eval): local processes or a Ray cluster.
 
-Kept free of heavy imports: a spawned worker runs :func:`pin_to_one_core` before it
-unpickles its first task, and so before Open3D starts its thread pool.
+:func:`worker_pool` gives every stage the same face, an ordered ``map(fn, items)``, over
+``concurrent.futures`` processes on this machine or Ray's ``multiprocessing.Pool`` (local,
+or a cluster at ``parallel.address``). Pinned pools (Open3D's tracking) run one thread per
+worker on a core of its own. Kept free of heavy imports: a spawned worker runs
+:func:`pin_to_one_core` before it unpickles its first task, and so before Open3D starts
+its thread pool.
 """
 
 from __future__ import annotations
 
 import logging
+import multiprocessing
 import os
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
 from typing import Any
+
+from hsp.errors import HspError
+
+BACKENDS = ("processes", "ray")
+
+
+@dataclass(frozen=True)
+class ScaleOut:
+    """Where the parallel map over episodes runs (``params.yaml: parallel``); the results do
+    not depend on it."""
+
+    backend: str = "processes"
+    """``processes`` on this machine, or ``ray``: Ray's multiprocessing pool."""
+    address: str | None = None
+    """Ray cluster to join (``auto``: the one this machine belongs to, ``ray://head:10001``);
+    none: Ray starts on this machine. Every node needs hsp installed and the data directories
+    at the same paths (a shared file system)."""
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise HspError(f"parallel.backend = {self.backend!r}: choose one of {', '.join(BACKENDS)}")
 
 
 def pin_to_one_core(counter: Any) -> None:
@@ -23,6 +51,62 @@ def pin_to_one_core(counter: Any) -> None:
         n = counter.value
         counter.value += 1
     os.sched_setaffinity(0, {cores[n % len(cores)]})
+
+
+def pin_to_a_core() -> None:
+    """Ray pool initializer: one core of those allowed, by process id (Ray's workers share
+    no counter), so that Open3D runs one thread."""
+    cores = sorted(os.sched_getaffinity(0))
+    os.sched_setaffinity(0, {cores[os.getpid() % len(cores)]})
+
+
+class _RayMap:
+    def __init__(self, pool: Any) -> None:
+        self.pool = pool
+
+    def map(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> Iterator[Any]:
+        return self.pool.imap(fn, list(items))
+
+
+@contextmanager
+def worker_pool(workers: int, scale: ScaleOut = ScaleOut(), pinned: bool = False) -> Iterator[Any]:
+    """A pool whose ``map(fn, items)`` yields ``fn(item)`` in order as workers finish them:
+    ``workers`` spawned processes here, or Ray workers (``scale``). ``pinned``: each worker
+    on one core with one OpenMP thread (Open3D's reductions then give the same bits every run)."""
+    if scale.backend == "ray":
+        with _ray_pool(workers, scale, pinned) as pool:
+            yield pool
+        return
+    with one_omp_thread() if pinned else nullcontext():
+        ctx = multiprocessing.get_context("spawn" if pinned else None)  # a fork would inherit Open3D's threads
+        extra = dict(initializer=pin_to_one_core, initargs=(ctx.Value("i", 0),)) if pinned else {}
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, **extra)
+        try:
+            yield pool
+        finally:
+            pool.shutdown(cancel_futures=True)
+
+
+@contextmanager
+def _ray_pool(workers: int, scale: ScaleOut, pinned: bool) -> Iterator[_RayMap]:
+    import ray
+    from ray.util.multiprocessing import Pool
+
+    started = not ray.is_initialized()
+    if started:
+        env = {"env_vars": {"OMP_NUM_THREADS": "1"}} if pinned else None
+        # a Ray started here runs its workers at the driver's priority (Ray's default, nice 15, let
+        # anything else on the machine starve them: 8x slower beside one busy process)
+        system = {"worker_niceness": 0} if scale.address is None else None
+        ray.init(address=scale.address, runtime_env=env, include_dashboard=False, log_to_driver=False,
+                 logging_level=logging.WARNING, _system_config=system)
+    pool = Pool(processes=workers, initializer=pin_to_a_core if pinned else None)
+    try:
+        yield _RayMap(pool)
+    finally:
+        pool.terminate()
+        if started:
+            ray.shutdown()
 
 
 @contextmanager

@@ -122,11 +122,16 @@ def test_parse_ground_truth_ablation(tmp_path, monkeypatch):
     assert baseline.exit_code == 1 and "unknown method 'dagger'" in baseline.output
 
 
-@pytest.mark.parametrize("stage", ["report"])
-def test_unfinished_stages_say_so(stage):
-    result = runner.invoke(app, [stage, "painting"])
-    assert result.exit_code == 1
-    assert "not available yet" in result.output
+def test_report_writes_the_summary_from_the_reports_it_finds(tmp_path):
+    (tmp_path / "stacking-1" / "bc").mkdir(parents=True)
+    (tmp_path / "stacking-1" / "bc" / "eval.json").write_text(json.dumps(
+        {"episodes": 4, "success_rate": 0.25, "success_rate_ci95_low": 0.05, "success_rate_ci95_high": 0.7,
+         "episode_length_mean": 20.0}))
+    assert runner.invoke(app, ["report", "--reports", str(tmp_path), "--no-experiments"]).exit_code == 0
+    assert "0.250 [0.050, 0.700]" in (tmp_path / "summary.md").read_text()
+    (tmp_path / "stacking-1" / "bc" / "eval.json").write_text("{")
+    result = runner.invoke(app, ["report", "--reports", str(tmp_path), "--no-experiments"])
+    assert result.exit_code == 1 and "eval.json: not valid JSON" in result.output
 
 
 def test_camera_settings_come_from_the_params_file(tmp_path):

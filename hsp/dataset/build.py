@@ -8,14 +8,12 @@ separates perception error from learning error, from the recordings' ground trut
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import time
 from collections import Counter
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.progress import Progress
@@ -23,7 +21,7 @@ from rich.progress import Progress
 from hsp.dataset.features import TrackStatus
 from hsp.dataset.writer import EpisodePoses, write_dataset
 from hsp.errors import HspError
-from hsp.parallel import captured_warnings, one_omp_thread, pin_to_one_core
+from hsp.parallel import ScaleOut, captured_warnings, worker_pool
 from hsp.perception.episode import object_models, track_recording
 from hsp.perception.metrics import auc, episode_errors, match_identical, status_trust
 from hsp.perception.table import GROUND_TRUTH_FRAME, TableConfig, in_recorded_world, table_frame
@@ -161,22 +159,7 @@ def _track_one(job: TrackJob) -> TrackOutcome:
     return TrackOutcome(episode, frames, tracked.seconds, errors)
 
 
-@contextmanager
-def _pool(workers: int) -> Iterator[ProcessPoolExecutor]:
-    """``workers`` processes, each on a core of its own. One worker is a process too: Open3D's
-    parallel reductions round differently from run to run on more than one thread, and the
-    dataset must not depend on the run or on how many processes made it."""
-    with one_omp_thread():
-        ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=pin_to_one_core,
-                                   initargs=(ctx.Value("i", 0),))
-        try:
-            yield pool
-        finally:
-            pool.shutdown(cancel_futures=True)
-
-
-def check_recordings(task: Task, jobs: list[TrackJob], pool: ProcessPoolExecutor) -> list[RecordingCheck]:
+def check_recordings(task: Task, jobs: list[TrackJob], pool: Any) -> list[RecordingCheck]:
     """:func:`check_recording` of every job, in order, with progress; warnings logged once, with their level."""
     checks = []
     with Progress() as progress:
@@ -189,7 +172,7 @@ def check_recordings(task: Task, jobs: list[TrackJob], pool: ProcessPoolExecutor
     return checks
 
 
-def _tracked_episodes(jobs: list[TrackJob], pool: ProcessPoolExecutor,
+def _tracked_episodes(jobs: list[TrackJob], pool: Any,
                       outcomes: list[TrackOutcome]) -> Iterator[EpisodePoses]:
     """Episodes in order, tracked in the pool's processes."""
     with Progress() as progress:
@@ -261,12 +244,15 @@ def dataset_rate(checks: list[RecordingCheck], tolerance: float) -> int:
 
 def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tracker", workers: int = 1,
           options: ReadOptions = ReadOptions(), cfg: TrackerConfig = TrackerConfig(),
-          seed: int = 0, table: TableConfig = TableConfig(), skip_bad: bool = False,
+          seed: int = 0, table: TableConfig = TableConfig(), skip_bad: bool = False, scale: ScaleOut = ScaleOut(),
           ) -> tuple[dict[str, float | int | str | list[str]], dict[str, float | int | str] | None]:
     """Build the dataset of ``task`` from every recording ``recordings_dir`` names; returns
     the parse report and, for tracked poses, the tracking report. Every recording is read
     and checked before any is tracked; a bad one is an error, or with ``skip_bad`` left out
-    and listed in the report."""
+    and listed in the report. Recordings are tracked in ``workers`` processes, one core and
+    one thread each (:func:`~hsp.parallel.worker_pool`): even one worker is a process, since
+    Open3D's reductions round differently on more threads and the dataset must not depend on
+    the run or on how many processes made it."""
     if poses_from not in POSE_SOURCES:
         raise HspError(f"--poses-from {poses_from!r}: choose one of {', '.join(POSE_SOURCES)}")
     recordings = find_recordings(recordings_dir)
@@ -278,7 +264,7 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
         counts = write_dataset(task, _ground_truth_episodes(task, recordings, recordings_dir, first, fps), out_dir, fps)
     else:
         counts, fps, extra, tracking = _parse_tracked(task, recordings, recordings_dir, out_dir, workers, options, cfg,
-                                                      seed, table, skip_bad, start)
+                                                      seed, table, skip_bad, start, scale)
     seconds = time.perf_counter() - start
     log.info("parsed %d recordings (%d frames) from %s into %s in %.1f s", counts["episodes"], counts["frames"],
              recordings_dir, out_dir, seconds)
@@ -286,13 +272,13 @@ def parse(task: Task, recordings_dir: Path, out_dir: Path, poses_from: str = "tr
 
 
 def _parse_tracked(task: Task, recordings: list[Path], root: Path, out_dir: Path, workers: int, options: ReadOptions,
-                   cfg: TrackerConfig, seed: int, table: TableConfig, skip_bad: bool, start: float):
+                   cfg: TrackerConfig, seed: int, table: TableConfig, skip_bad: bool, start: float, scale: ScaleOut):
     """Check every recording, then track the good ones into the dataset: counts, frame rate,
     the check's part of the parse report and the tracking report."""
     object_models(task, cfg, seed)  # a missing mesh fails here, before any work
     jobs = [TrackJob(task.name, task.objects_dir.parent, p, recording_name(p, root), options, cfg, seed, table)
             for p in recordings]
-    with _pool(workers) as pool:
+    with worker_pool(workers, scale, pinned=True) as pool:
         checks = check_recordings(task, jobs, pool)
         readable = [c for c in checks if not c.error]
         fps = dataset_rate(readable, RATE_TOLERANCE) if readable else 0  # marks recordings at another rate bad

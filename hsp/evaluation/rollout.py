@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import logging
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
 from hsp.evaluation.observers import CameraObserver, Observer, SimObserver
 from hsp.evaluation.stats import summarise
 from hsp.fileio import atomic_path, write_json
+from hsp.parallel import ScaleOut, worker_pool
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.record import episode_seed
 from hsp.recording.writer import CameraRig
@@ -57,6 +57,8 @@ class EvalConfig:
     """The recordings' camera and depth model, for ``--observer camera``."""
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     """The tracker's settings, for ``--observer camera`` (``params.yaml: tracker``)."""
+    scale: ScaleOut = field(default_factory=ScaleOut)
+    """Where the workers run (``params.yaml: parallel``)."""
 
     def __post_init__(self) -> None:
         for key in ("episodes", "runs", "workers"):
@@ -173,7 +175,7 @@ def evaluate(task: Task, method: str, observer: str, model_dir: Path | None, cfg
         log.info("eval %s: %s, observer %s, %d runs × %d episodes, %d workers", task.name, method, observer, cfg.runs,
                  cfg.episodes, cfg.workers)
         records = []
-        with Progress() as progress, ProcessPoolExecutor(max_workers=cfg.workers) as pool:
+        with Progress() as progress, worker_pool(cfg.workers, cfg.scale) as pool:
             bar = progress.add_task(f"eval {task.name} {method}", total=len(jobs))
             for rec in pool.map(_job, jobs):
                 records.append(rec)

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +14,7 @@ from rich.progress import Progress
 from hsp.config import section
 from hsp.errors import HspError
 from hsp.fileio import atomic_path
+from hsp.parallel import ScaleOut, worker_pool
 from hsp.recording.writer import CameraRig, write_episode
 from hsp.sim.camera import CameraConfig
 from hsp.sim.demonstration import demonstrate
@@ -36,6 +36,8 @@ class RecordConfig:
     """Processes recording episodes in parallel."""
     rig: CameraRig | None = None
     """Camera and depth-sensor model; ``None`` records the ground-truth topics only."""
+    scale: ScaleOut = field(default_factory=ScaleOut)
+    """Where the workers run (``params.yaml: parallel``)."""
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -80,12 +82,12 @@ def record(task: Task, cfg: RecordConfig, out_dir: Path, force: bool = False) ->
         results = []
         with Progress() as progress:
             bar = progress.add_task(f"record {task.name}", total=len(jobs))
-            if cfg.workers == 1:
+            if cfg.workers == 1 and cfg.scale.backend == "processes":
                 for job in jobs:
                     results.append(_record_one(job))
                     progress.advance(bar)
             else:
-                with ProcessPoolExecutor(max_workers=cfg.workers) as pool:
+                with worker_pool(cfg.workers, cfg.scale) as pool:
                     for r in pool.map(_record_one, jobs):
                         results.append(r)
                         progress.advance(bar)
