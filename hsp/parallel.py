@@ -98,8 +98,12 @@ def _ray_pool(workers: int, scale: ScaleOut, pinned: bool) -> Iterator[_RayMap]:
         # a Ray started here runs its workers at the driver's priority (Ray's default, nice 15, let
         # anything else on the machine starve them: 8x slower beside one busy process)
         system = {"worker_niceness": 0} if scale.address is None else None
-        ray.init(address=scale.address, runtime_env=env, include_dashboard=False, log_to_driver=False,
-                 logging_level=logging.WARNING, _system_config=system)
+        try:  # "local": a new Ray here, even where RAY_ADDRESS or a running cluster would be joined
+            ray.init(address=scale.address or "local", runtime_env=env, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.WARNING, _system_config=system)
+        except (ConnectionError, ValueError, RuntimeError) as e:
+            raise HspError(f"params.yaml: parallel.address = {scale.address!r}: Ray could not start or connect "
+                           f"({str(e).splitlines()[0]})") from None
     pool = Pool(processes=workers, initializer=pin_to_a_core if pinned else None)
     try:
         yield _RayMap(pool)

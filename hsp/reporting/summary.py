@@ -302,10 +302,14 @@ def write_report(reports: Path, tasks: list[str], params: dict, experiments: lis
     and the rows of DVC ``experiments`` (:func:`experiment_rows`); what was found, for the log."""
     current = gather(reports, tasks)
     results = merged(current, from_experiments(list(experiments), tasks))
+    names = ["demonstrations.csv"] + [f"{t}.png" for t in sorted({r.task for r in results if r.method != "oracle"})]
+    plots = [reports / "plots" / n for n in names]
+    text = summary_markdown(reports, tasks, current, results, params, plots)  # every report read before any write
     with atomic_path(reports / "plots") as tmp:  # the whole directory, replaced at once
-        plots = [reports / "plots" / p.name for p in write_curves(results, tmp)]
+        written = write_curves(results, tmp)
+    assert [p.name for p in written] == names
     with atomic_path(reports / "summary.md") as tmp:
-        tmp.write_text(summary_markdown(reports, tasks, current, results, params, plots))
+        tmp.write_text(text)
     log.info("report: %d evaluations of %d tasks read from %s, %d more from DVC experiments", len(current),
              len(tasks), reports, len(results) - len(current))
     return {"evaluations": len(current), "experiments": len(results) - len(current), "plots": [str(p) for p in plots]}

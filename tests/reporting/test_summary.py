@@ -65,6 +65,10 @@ def test_a_broken_report_names_its_file_and_nothing_is_written(reports):
     _write(reports / "stacking-1" / "supervised" / "eval.json", {"episodes": 10})
     with pytest.raises(HspError, match=r"supervised/eval.json: missing success_rate"):
         write_report(reports, TASKS, {})
+    (reports / "stacking-1" / "supervised" / "eval.json").unlink()
+    (reports / "stacking-1" / "tracking.json").write_text("{")  # read only for the summary's text
+    with pytest.raises(HspError, match=r"tracking.json: not valid JSON"):
+        write_report(reports, TASKS, {})
     assert (reports / "summary.md").read_text() == "previous" and not (reports / "plots").exists()
 
 
