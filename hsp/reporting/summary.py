@@ -85,12 +85,18 @@ def gather(reports: Path, tasks: list[str]) -> list[Result]:
             _need(ev, ("episodes", "success_rate", "success_rate_ci95_low", "success_rate_ci95_high",
                        "episode_length_mean"), path)
             train = _read(reports / task / method / "train.json") or {}
-            out.append(Result(
-                task, method, 0 if method == "oracle" else int(record.get("episodes", 0)), int(ev["episodes"]),
-                int(ev.get("runs", 1)), float(ev["success_rate"]), float(ev["success_rate_ci95_low"]),
-                float(ev["success_rate_ci95_high"]), float(ev.get("success_rate_std", float("nan"))),
-                float(ev["episode_length_mean"]), train.get("seconds"), ev.get("seconds")))
+            out.append(_result(task, method, record.get("episodes"), ev, train.get("seconds")))
     return out
+
+
+def _result(task: str, method: str, recorded: float | None, ev: dict, train_seconds: float | None) -> Result:
+    """A :class:`Result` from one ``eval.json``'s fields ``ev`` (NaN where one is missing) and
+    the number of ``recorded`` demonstrations of its task."""
+    get = lambda field: float(ev.get(field, float("nan")))  # noqa: E731
+    return Result(task, method, 0 if method == "oracle" else int(recorded or 0), int(ev.get("episodes", 0)),
+                  int(ev.get("runs", 1)), get("success_rate"), get("success_rate_ci95_low"),
+                  get("success_rate_ci95_high"), get("success_rate_std"), get("episode_length_mean"), train_seconds,
+                  ev.get("seconds"))
 
 
 def from_experiments(rows: list[dict], tasks: list[str]) -> list[Result]:
@@ -107,13 +113,8 @@ def from_experiments(rows: list[dict], tasks: list[str]) -> list[Result]:
                 key = f"reports/{task}/{method}/eval.json:"
                 if row.get(key + "success_rate") is None:
                     continue
-                get = lambda field, default=float("nan"): row.get(key + field, default)  # noqa: E731
-                out.append(Result(
-                    task, method, 0 if method == "oracle" else int(record or 0), int(get("episodes", 0)),
-                    int(get("runs", 1)), float(get("success_rate")), float(get("success_rate_ci95_low")),
-                    float(get("success_rate_ci95_high")), float(get("success_rate_std")),
-                    float(get("episode_length_mean")), row.get(f"reports/{task}/{method}/train.json:seconds"),
-                    get("seconds", None)))
+                ev = {k[len(key):]: v for k, v in row.items() if k.startswith(key)}
+                out.append(_result(task, method, record, ev, row.get(f"reports/{task}/{method}/train.json:seconds")))
     return out
 
 
@@ -227,14 +228,15 @@ def write_curves(results: list[Result], plots: Path) -> list[Path]:
     import matplotlib.pyplot as plt
 
     learnt = [r for r in results if r.method != "oracle"]
+    names = plot_names(results)
     plots.mkdir(parents=True)
     with (plots / "demonstrations.csv").open("w", newline="") as f:
         w = csv.DictWriter(f, CURVE_FIELDS)
         w.writeheader()
         for r in sorted(learnt, key=lambda r: (r.task, r.method, r.demonstrations)):
             w.writerow({k: v for k, v in asdict(r).items() if k in CURVE_FIELDS})
-    written = [plots / "demonstrations.csv"]
-    for task in sorted({r.task for r in learnt}):
+    for name in names[1:]:
+        task = name.removesuffix(".png")
         fig, (ax_s, ax_l) = plt.subplots(1, 2, figsize=(9, 3.5))
         for m in METHODS:
             rs = sorted((r for r in learnt if r.task == task and r.method == m), key=lambda r: r.demonstrations)
@@ -251,11 +253,15 @@ def write_curves(results: list[Result], plots: Path) -> list[Path]:
         ax_l.set(xlabel="demonstrations", ylabel="episode length (steps)", xlim=(0, 1.1 * most), title=task)
         ax_l.legend(fontsize=7)
         fig.tight_layout()
-        path = plots / f"{task}.png"
-        fig.savefig(path, dpi=100)
+        fig.savefig(plots / name, dpi=100)
         plt.close(fig)
-        written.append(path)
-    return written
+    return [plots / n for n in names]
+
+
+def plot_names(results: list[Result]) -> list[str]:
+    """The files :func:`write_curves` writes for ``results``: the CSV, then a PNG per task a learnt method was
+    evaluated on."""
+    return ["demonstrations.csv"] + [f"{t}.png" for t in sorted({r.task for r in results if r.method != "oracle"})]
 
 
 def summary_markdown(reports: Path, tasks: list[str], results: list[Result], curves: list[Result], params: dict,
@@ -302,12 +308,10 @@ def write_report(reports: Path, tasks: list[str], params: dict, experiments: lis
     and the rows of DVC ``experiments`` (:func:`experiment_rows`); what was found, for the log."""
     current = gather(reports, tasks)
     results = merged(current, from_experiments(list(experiments), tasks))
-    names = ["demonstrations.csv"] + [f"{t}.png" for t in sorted({r.task for r in results if r.method != "oracle"})]
-    plots = [reports / "plots" / n for n in names]
+    plots = [reports / "plots" / n for n in plot_names(results)]
     text = summary_markdown(reports, tasks, current, results, params, plots)  # every report read before any write
     with atomic_path(reports / "plots") as tmp:  # the whole directory, replaced at once
-        written = write_curves(results, tmp)
-    assert [p.name for p in written] == names
+        write_curves(results, tmp)
     with atomic_path(reports / "summary.md") as tmp:
         tmp.write_text(text)
     log.info("report: %d evaluations of %d tasks read from %s, %d more from DVC experiments", len(current),
