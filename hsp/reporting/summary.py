@@ -220,8 +220,8 @@ def stage_minutes(reports: Path, tasks: list[str]) -> str:
     report's ``seconds``: as measured when the stage last ran); training and evaluation
     summed over the methods found."""
     rows = ["| task | record | parse | label | train (methods) | eval (methods) | total |", "|---|---|---|---|---|---|---|"]
+    seconds = lambda path: _number((_read(path) or {}).get("seconds"), "seconds", path)  # noqa: E731
     for t in tasks:
-        seconds = lambda path: _number((_read(path) or {}).get("seconds"), "seconds", path)  # noqa: E731
         single = [seconds(reports / t / name) for name in ("record.json", "parse.json", "labels.json")]
         per_method = [[seconds(reports / t / m / name) for m in METHODS] for name in ("train.json", "eval.json")]
         cells = ["—" if x is None else f"{x / 60:.0f}" for x in single]
