@@ -1,7 +1,10 @@
 """The whole DVC pipeline, every stage through the real code, on a tiny configuration:
 a broken hand-over between stages (a path, a report key, a params name) fails here."""
 
+import csv
+import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -32,11 +35,19 @@ def _merge(base: dict, tiny: dict) -> dict:
     return out
 
 
-def _run(repo, *args):
+def _run(repo, *args, program=(sys.executable, "-m", "dvc")):
     env = {**os.environ, "PATH": f"{os.path.dirname(sys.executable)}:{os.environ['PATH']}", "HF_HUB_OFFLINE": "1"}
-    result = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=repo, env=env, capture_output=True, text=True)
+    result = subprocess.run([*program, *args], cwd=repo, env=env, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return result.stdout
+
+
+def _git(repo, *args):
+    return _run(repo, "-c", "user.name=hsp", "-c", "user.email=hsp@example.org", *args, program=("git",))
+
+
+def _ran(output: str) -> set[str]:
+    return set(re.findall(r"Running stage '([^']+)'", output))
 
 
 def test_every_stage_runs_end_to_end_a_second_repro_does_nothing_and_a_remote_restores_it(tmp_path):
@@ -47,13 +58,16 @@ def test_every_stage_runs_end_to_end_a_second_repro_does_nothing_and_a_remote_re
     repo = tmp_path / "repo"
     shutil.copytree(REPO / "hsp", repo / "hsp", ignore=shutil.ignore_patterns("__pycache__"))
     shutil.copytree(REPO / "pipeline", repo / "pipeline")
+    shutil.copy(REPO / ".gitignore", repo / ".gitignore")
     others = [t for t in ("painting", "stacking-1", "stacking-2", "tire-removal") if t != TASK]
     stages = (REPO / "dvc.yaml").read_text().replace("[painting, stacking-1, stacking-2, tire-removal]", f"[{TASK}]")
     stages = "\n".join(line for line in stages.splitlines() if line.strip() not in {f"- reports/{t}" for t in others})
     (repo / "dvc.yaml").write_text(stages + "\n")
     params = yaml.safe_load((REPO / "params.yaml").read_text())
     (repo / "params.yaml").write_text(yaml.safe_dump(_merge(params, TINY), sort_keys=False))
-    _run(repo, "init", "--no-scm", "-q")
+    _git(repo, "init", "-q")
+    _run(repo, "init", "-q")
+    shutil.copytree(REPO / ".dvc" / "plots", repo / ".dvc" / "plots")
 
     _run(repo, "repro")
     summary = (repo / "reports" / "summary.md").read_text()
@@ -63,8 +77,15 @@ def test_every_stage_runs_end_to_end_a_second_repro_does_nothing_and_a_remote_re
         assert report["episodes"] == 2 and 0.0 <= report["success_rate"] <= 1.0, m
         assert f"| {TASK} | {m} | {0 if m == 'oracle' else 2} | 2 (1) |" in summary, m
     assert (repo / "reports" / "plots" / f"{TASK}.png").is_file()
+    plots = json.loads(_run(repo, "plots", "show", "--json"))["data"]
+    assert set(plots) == {"success", "episode_length"}  # Figure 4, one line per method
+    assert {v["method"] for v in plots["success"][0]["content"]["data"]["values"]} == set(methods) - {"oracle"}
     assert "up to date" in _run(repo, "status")
     assert "Stage 'record@stacking-1' didn't change, skipping" in _run(repo, "repro")
+    tiny = yaml.safe_load((repo / "params.yaml").read_text())
+    tiny["baselines"]["bc"]["learning_rate"] *= 2
+    (repo / "params.yaml").write_text(yaml.safe_dump(tiny, sort_keys=False))
+    assert _ran(_run(repo, "repro")) == {f"train-baseline@{TASK}-bc", f"eval-baseline@{TASK}-bc", "report"}
 
     _run(repo, "remote", "add", "-d", "local", str(tmp_path / "remote"))
     _run(repo, "push")
@@ -74,3 +95,12 @@ def test_every_stage_runs_end_to_end_a_second_repro_does_nothing_and_a_remote_re
         shutil.rmtree(videos)
     _run(repo, "pull")
     assert (repo / "data" / "models" / TASK / "proposed").is_dir() and "up to date" in _run(repo, "status")
+
+    # A point of the demonstration sweep: a DVC experiment with 3 recordings, gathered by `hsp report`.
+    _git(repo, "add", "-A")
+    _git(repo, "commit", "-qm", "tiny pipeline")
+    _run(repo, "exp", "run", "--temp", "-S", f"record.episodes.{TASK}=3")
+    _run(repo, "report", program=(os.path.join(os.path.dirname(sys.executable), "hsp"),))
+    points = {(r["method"], r["demonstrations"]) for r in csv.DictReader((repo / "reports" / "plots" /
+                                                                          "demonstrations.csv").open())}
+    assert points == {(m, n) for m in methods if m != "oracle" for n in ("2", "3")}

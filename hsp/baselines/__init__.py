@@ -13,15 +13,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hsp.errors import HspError
+from hsp.methods import BASELINES as METHODS
 from hsp.tasks.registry import Task
 
 if TYPE_CHECKING:
     from hsp.evaluation.env import EnvConfig
 
 log = logging.getLogger(__name__)
-
-METHODS = ("bc", "bc-rnn", "taco", "gail", "act", "diffusion")
-
 
 def check_method(method: str, others: tuple[str, ...] = ()) -> None:
     """A one-line error for a name that is no method (``others``: the caller's own methods,

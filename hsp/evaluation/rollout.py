@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 from rich.progress import Progress
 
-from hsp.baselines import METHODS as BASELINES
 from hsp.baselines import check_method, load_agent
 from hsp.errors import HspError
 from hsp.evaluation.env import EnvConfig, HspEnv, world_poses
 from hsp.evaluation.observers import CameraObserver, Observer, SimObserver
 from hsp.evaluation.stats import summarise
 from hsp.fileio import atomic_path, write_json
+from hsp.methods import HIERARCHY, METHODS
 from hsp.parallel import ScaleOut, worker_pool
 from hsp.perception.tracker import TrackerConfig
 from hsp.recording.record import episode_seed
@@ -31,8 +31,6 @@ from hsp.tasks.registry import Task, load_task
 
 log = logging.getLogger(__name__)
 
-HIERARCHY = ("proposed", "supervised")
-METHODS = ("oracle", *HIERARCHY, *BASELINES)
 OBSERVERS = ("sim", "camera")
 EVAL_STREAM = 1
 """Third entropy word of the evaluation seeds, apart from the recordings' two-word ones."""

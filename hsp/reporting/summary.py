@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from hsp.errors import HspError
-from hsp.evaluation.rollout import METHODS
 from hsp.fileio import atomic_path
+from hsp.methods import METHODS
 
 log = logging.getLogger(__name__)
 
@@ -66,6 +66,16 @@ def _read(path: Path) -> dict | None:
         raise HspError(f"{path}: not valid JSON ({e.msg}, line {e.lineno})") from None
 
 
+def _number(value: object, name: str, source: object, default: float | None = None) -> float | None:
+    """``value`` as a float (``default`` where absent); a one-line error naming ``source``
+    and the field where it is not a number."""
+    if value is None:
+        return default
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise HspError(f"{source}: {name} is not a number ({value!r})")
+    return float(value)
+
+
 def _need(report: dict, keys: tuple[str, ...], path: Path) -> None:
     missing = [k for k in keys if k not in report]
     if missing:
@@ -76,7 +86,8 @@ def gather(reports: Path, tasks: list[str]) -> list[Result]:
     """Every ``reports/TASK/METHOD/eval.json`` of ``tasks`` and known methods, as results."""
     out = []
     for task in tasks:
-        record = _read(reports / task / "record.json") or {}
+        path = reports / task / "record.json"
+        recorded = _number((_read(path) or {}).get("episodes"), "episodes", path)
         for method in METHODS:
             path = reports / task / method / "eval.json"
             ev = _read(path)
@@ -84,19 +95,21 @@ def gather(reports: Path, tasks: list[str]) -> list[Result]:
                 continue
             _need(ev, ("episodes", "success_rate", "success_rate_ci95_low", "success_rate_ci95_high",
                        "episode_length_mean"), path)
-            train = _read(reports / task / method / "train.json") or {}
-            out.append(_result(task, method, record.get("episodes"), ev, train.get("seconds")))
+            train = reports / task / method / "train.json"
+            train_seconds = _number((_read(train) or {}).get("seconds"), "seconds", train)
+            out.append(_result(task, method, recorded, ev, train_seconds, str(path)))
     return out
 
 
-def _result(task: str, method: str, recorded: float | None, ev: dict, train_seconds: float | None) -> Result:
+def _result(task: str, method: str, recorded: object, ev: dict, train_seconds: object, source: str) -> Result:
     """A :class:`Result` from one ``eval.json``'s fields ``ev`` (NaN where one is missing) and
-    the number of ``recorded`` demonstrations of its task."""
-    get = lambda field: float(ev.get(field, float("nan")))  # noqa: E731
-    return Result(task, method, 0 if method == "oracle" else int(recorded or 0), int(ev.get("episodes", 0)),
-                  int(ev.get("runs", 1)), get("success_rate"), get("success_rate_ci95_low"),
-                  get("success_rate_ci95_high"), get("success_rate_std"), get("episode_length_mean"), train_seconds,
-                  ev.get("seconds"))
+    the number of ``recorded`` demonstrations of its task; a one-line error naming ``source``
+    where a figure is not a number."""
+    get = lambda field, default=float("nan"): _number(ev.get(field), field, source, default)  # noqa: E731
+    return Result(task, method, 0 if method == "oracle" else int(_number(recorded, "demonstrations", source, 0)),
+                  int(get("episodes", 0)), int(get("runs", 1)), get("success_rate"), get("success_rate_ci95_low"),
+                  get("success_rate_ci95_high"), get("success_rate_std"), get("episode_length_mean"),
+                  _number(train_seconds, "train seconds", source), get("seconds", None))
 
 
 def from_experiments(rows: list[dict], tasks: list[str]) -> list[Result]:
@@ -114,7 +127,8 @@ def from_experiments(rows: list[dict], tasks: list[str]) -> list[Result]:
                 if row.get(key + "success_rate") is None:
                     continue
                 ev = {k[len(key):]: v for k, v in row.items() if k.startswith(key)}
-                out.append(_result(task, method, record, ev, row.get(f"reports/{task}/{method}/train.json:seconds")))
+                out.append(_result(task, method, record, ev, row.get(f"reports/{task}/{method}/train.json:seconds"),
+                                   f"DVC experiment {row.get('rev') or row.get('name')}: {key[:-1]}"))
     return out
 
 
@@ -191,11 +205,12 @@ def stage_table(reports: Path, tasks: list[str], name: str) -> str:
     keys = STAGE_COLUMNS[name]
     rows = ["| task | " + " | ".join(keys) + " |", "|---|" + "---|" * len(keys)]
     for t in tasks:
-        rep = _read(reports / t / name)
+        path = reports / t / name
+        rep = _read(path)
         if rep is None:
             rows.append(f"| {t} | " + " | ".join(["not run"] * len(keys)) + " |")
             continue
-        vals = [rep.get(k) for k in keys]
+        vals = [_number(rep.get(k), k, path) for k in keys]
         rows.append(f"| {t} | " + " | ".join("—" if v is None else f"{v:.3g}" for v in vals) + " |")
     return "\n".join(rows)
 
@@ -205,10 +220,10 @@ def stage_minutes(reports: Path, tasks: list[str]) -> str:
     report's ``seconds``: as measured when the stage last ran); training and evaluation
     summed over the methods found."""
     rows = ["| task | record | parse | label | train (methods) | eval (methods) | total |", "|---|---|---|---|---|---|---|"]
+    seconds = lambda path: _number((_read(path) or {}).get("seconds"), "seconds", path)  # noqa: E731
     for t in tasks:
-        single = [(_read(reports / t / name) or {}).get("seconds") for name in ("record.json", "parse.json", "labels.json")]
-        per_method = [[(_read(reports / t / m / name) or {}).get("seconds") for m in METHODS] for name in ("train.json",
-                                                                                                     "eval.json")]
+        single = [seconds(reports / t / name) for name in ("record.json", "parse.json", "labels.json")]
+        per_method = [[seconds(reports / t / m / name) for m in METHODS] for name in ("train.json", "eval.json")]
         cells = ["—" if x is None else f"{x / 60:.0f}" for x in single]
         for xs in per_method:
             found = [x for x in xs if x is not None]

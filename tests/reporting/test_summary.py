@@ -83,3 +83,15 @@ def test_experiments_add_points_for_other_numbers_of_demonstrations(reports):
     points = [(r["demonstrations"], r["success_rate"]) for r in csv.DictReader((reports / "plots" / "demonstrations.csv").open())]
     assert points == [("5", "0.1"), ("40", "0.968")]  # 40 from the workspace's files, 5 from an experiment
     assert "stacking-1 5, stacking-1 40" in (reports / "summary.md").read_text()
+
+
+@pytest.mark.parametrize("name, field, value", [("stacking-1/proposed/eval.json", "success_rate", "0.9"),
+                                                ("stacking-1/proposed/train.json", "seconds", True),
+                                                ("stacking-1/record.json", "episodes", "forty"),
+                                                ("stacking-1/tracking.json", "lost_fraction", [0.1])])
+def test_a_figure_that_is_not_a_number_names_its_file_and_field(reports, name, field, value):
+    path = reports / name
+    _write(path, json.loads(path.read_text()) | {field: value})
+    with pytest.raises(HspError, match=rf"{name}: {field} is not a number"):
+        write_report(reports, TASKS, {})
+    assert not (reports / "summary.md").exists()
