@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from hsp.errors import HspError
-from hsp.methods import BASELINES as METHODS
+from hsp.methods import BASELINES
 from hsp.tasks.registry import Task
 
 if TYPE_CHECKING:
@@ -24,8 +24,8 @@ log = logging.getLogger(__name__)
 def check_method(method: str, others: tuple[str, ...] = ()) -> None:
     """A one-line error for a name that is no method (``others``: the caller's own methods,
     listed in the message)."""
-    if method not in METHODS:
-        raise HspError(f"unknown method {method!r}; valid methods: {', '.join((*others, *METHODS))}")
+    if method not in BASELINES:
+        raise HspError(f"unknown method {method!r}; valid methods: {', '.join((*others, *BASELINES))}")
 
 
 _PARTS = {  # method: its module, configuration (params.yaml: baselines.METHOD) and closed-loop agent

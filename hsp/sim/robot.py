@@ -69,6 +69,10 @@ class KukaArm:
     def joint_positions(self) -> np.ndarray:
         return np.array([s[0] for s in p.getJointStates(self.robot, self.joints, physicsClientId=self.client)])
 
+    def _flange_for(self, T_world_tcp: np.ndarray) -> np.ndarray:
+        """The flange pose ``(7,)`` that puts the tool-centre point at ``T_world_tcp (7,)``."""
+        return np.concatenate(_compose((T_world_tcp[:3], T_world_tcp[3:]), self._tcp_flange))
+
     def tcp_pose(self) -> np.ndarray:
         return body_pose(self.client, self.body)
 
@@ -80,8 +84,7 @@ class KukaArm:
         ):
             return
         self._last_command = np.array(T_world_tcp, copy=True)
-        T_world_flange = np.concatenate(_compose((T_world_tcp[:3], T_world_tcp[3:]), self._tcp_flange))
-        self.q_target = self.ik.solve_from(T_world_flange, [self.q_target, REST])
+        self.q_target = self.ik.solve_from(self._flange_for(T_world_tcp), [self.q_target, REST])
         p.setJointMotorControlArray(
             self.robot, self.joints, p.POSITION_CONTROL, targetPositions=self.q_target.tolist(),
             forces=[self.max_force] * 7, positionGains=[0.3] * 7, velocityGains=[1.0] * 7,
@@ -125,7 +128,7 @@ class KukaArm:
             s = np.arange(1, n + 1) / n
             path = np.concatenate([start[:3] + s[:, None] * (T[:3] - start[:3]), slerp(start[3:], T[3:], s)], axis=1)
             for P in path:
-                T_world_flange = compose(P, inverse(self.T_flange_tcp))
+                T_world_flange = self._flange_for(P)
                 q = self.ik.solve(T_world_flange, q)
                 worst = max(worst, self.ik.pose_error(q, T_world_flange))
             start = T
@@ -133,7 +136,7 @@ class KukaArm:
 
     def reset_to(self, T_world_tcp: np.ndarray) -> None:
         """Teleport the arm (and tool) so that the TCP is at ``T_world_tcp``; for layouts."""
-        T_world_flange = compose(T_world_tcp, inverse(self.T_flange_tcp))
+        T_world_flange = self._flange_for(T_world_tcp)
         self.q_target = self.ik.solve(T_world_flange, REST)
         for j, q in zip(self.joints, self.q_target):
             p.resetJointState(self.robot, j, float(q), physicsClientId=self.client)
