@@ -20,6 +20,7 @@ from rich.table import Table
 
 from hsp.config import load_params, param, section
 from hsp.errors import HspError
+from hsp.methods import BASELINES, METHODS
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
 err = Console(stderr=True)
@@ -242,7 +243,7 @@ def env_config(params: dict, task: str):
 def train(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
     method: str = typer.Option("proposed", help="proposed (the hierarchy on pseudo-labels) | supervised (on the "
-                               "demonstrator's annotation: the upper bound) | a baseline: bc | bc-rnn | taco | gail"),
+                               f"demonstrator's annotation: the upper bound) | a baseline: {' | '.join(BASELINES)}"),
     dataset: Optional[Path] = typer.Option(None, help="pose dataset [data/datasets/TASK]"),
     labels: Optional[Path] = typer.Option(None, help="pseudo-labels, for proposed [data/labels/TASK.parquet]"),
     recordings: Optional[Path] = typer.Option(None, help="recordings with the annotation, for supervised and taco's sketches "
@@ -290,8 +291,7 @@ def train(
 @app.command(name="eval")
 def evaluate(
     task: str = typer.Argument(..., help="task name (see `hsp tasks`)"),
-    method: str = typer.Option("proposed", help="oracle (the demonstrator's plan) | proposed | supervised | "
-                               "bc | bc-rnn | taco | gail"),
+    method: str = typer.Option("proposed", help=" | ".join(METHODS) + " (oracle: the demonstrator's plan)"),
     observer: str = typer.Option("sim", help="sim (the simulator's poses) | camera (rendered RGB-D, tracked online)"),
     episodes: Optional[int] = typer.Option(None, help="episodes per run [params: eval.episodes]"),
     runs: Optional[int] = typer.Option(None, help="runs, each on its own held-out layouts [params: eval.runs]"),
