@@ -3,7 +3,8 @@ executed by the Kuka through the same environment and controller as every learne
 
 It proves the environment, the controller, grasping and the checkers before any learning
 is blamed. The plan reads the poses the observer gives (the simulator's, or the tracker's
-with ``--observer camera``); each way-point becomes a minimum-jerk segment of the
+with ``--observer camera``), symmetric objects' orientations made canonical as the datasets and
+the learnt policies' runner have them; each way-point becomes a minimum-jerk segment of the
 demonstrator's duration, followed by its pause, then by up to ``SETTLE_S`` of holding the
 goal until the tool is there (a robot's lag is not a human's).
 """
@@ -16,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hsp.geometry import compose, inverse, relative
+from hsp.labeling.label import canonical_poses
 from hsp.sim.demonstration import PlanContext, segment_duration
 from hsp.sim.demonstrators import PLANS
 from hsp.sim.demonstrators.steps import Grasp, Move, Release
@@ -38,7 +40,8 @@ class Oracle:
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
         self.rng = np.random.default_rng(seed)
-        self.poses = poses
+        self.first = np.asarray(poses, np.float64).copy()
+        self.poses = self._canonical(poses)
         self.plan = PLANS[self.task.spec.kind](PlanContext(self.task, self.rng, lambda: self.poses, self.reach_error))
         self.path: deque[np.ndarray] = deque()
         self.command = poses[0].copy()
@@ -47,7 +50,7 @@ class Oracle:
         self.waited = 0
 
     def act(self, poses: np.ndarray) -> np.ndarray:
-        self.poses = poses
+        self.poses = self._canonical(poses)
         while not self.path and not self._waiting():
             step = next(self.plan, None)
             if step is None:
@@ -61,6 +64,15 @@ class Oracle:
         if self.path:
             self.command = self.path.popleft()
         return np.concatenate([self.command, [self.grip]])
+
+    def _canonical(self, poses: np.ndarray) -> np.ndarray:
+        """World poses ``(n, 7)`` with every object's orientation but the end-effector's made
+        canonical (the symmetric equivalent nearest the world axes at the episode's first
+        frame, kept): the plans take a resting block's z axis to be up, which a tracker's
+        estimate of a cube need not be (any of its 24 look-alike frames fits the image)."""
+        out = canonical_poses(np.stack([self.first, poses]), [o.symmetry for o in self.task.objects])[1]
+        out[0] = poses[0]
+        return out
 
     def _tcp_goal(self, move: Move) -> np.ndarray:
         """The tool-centre point's world pose that puts the tool at ``move.pose`` in the target's frame."""
