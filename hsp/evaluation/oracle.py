@@ -3,10 +3,10 @@ executed by the Kuka through the same environment and controller as every learne
 
 It proves the environment, the controller, grasping and the checkers before any learning
 is blamed. The plan reads the poses the observer gives (the simulator's, or the tracker's
-with ``--observer camera``), symmetric objects' orientations made canonical as the datasets and
-the learnt policies' runner have them; each way-point becomes a minimum-jerk segment of the
-demonstrator's duration, followed by its pause, then by up to ``SETTLE_S`` of holding the
-goal until the tool is there (a robot's lag is not a human's).
+with ``--observer camera``), each symmetric object in the look-alike frame nearest the one
+it had a step before (nearest the world axes at the first); each way-point becomes a
+minimum-jerk segment of the demonstrator's duration, followed by its pause, then by up to
+``SETTLE_S`` of holding the goal until the tool is there (a robot's lag is not a human's).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from hsp.geometry import compose, inverse, relative
-from hsp.labeling.label import canonical_poses
+from hsp.geometry.symmetry import nearest_equivalent
 from hsp.sim.demonstration import PlanContext, segment_duration
 from hsp.sim.demonstrators import PLANS
 from hsp.sim.demonstrators.steps import Grasp, Move, Release
@@ -40,7 +40,8 @@ class Oracle:
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
         self.rng = np.random.default_rng(seed)
-        self.first = np.asarray(poses, np.float64).copy()
+        self.poses = np.asarray(poses, np.float64).copy()
+        self.poses[:, 3:] = [0.0, 0.0, 0.0, 1.0]
         self.poses = self._canonical(poses)
         self.plan = PLANS[self.task.spec.kind](PlanContext(self.task, self.rng, lambda: self.poses, self.reach_error))
         self.path: deque[np.ndarray] = deque()
@@ -66,12 +67,14 @@ class Oracle:
         return np.concatenate([self.command, [self.grip]])
 
     def _canonical(self, poses: np.ndarray) -> np.ndarray:
-        """World poses ``(n, 7)`` with every object's orientation but the end-effector's made
-        canonical (the symmetric equivalent nearest the world axes at the episode's first
-        frame, kept): the plans take a resting block's z axis to be up, which a tracker's
-        estimate of a cube need not be (any of its 24 look-alike frames fits the image)."""
-        out = canonical_poses(np.stack([self.first, poses]), [o.symmetry for o in self.task.objects])[1]
-        out[0] = poses[0]
+        """World poses ``(n, 7)`` with every object but the end-effector in the look-alike
+        frame nearest the one it had a step before: the plans take a resting block's z axis
+        to be up, and a tracker may give a cube in any of its 24 look-alike frames, or switch
+        between them when it re-finds a covered block (a base seen lying on its side put the
+        next block's place 8 cm beside the tower)."""
+        out = np.asarray(poses, np.float64).copy()
+        for i, o in enumerate(self.task.objects[1:], start=1):
+            out[i, 3:] = nearest_equivalent(out[i:i + 1, 3:], o.symmetry, self.poses[i:i + 1, 3:])[0]
         return out
 
     def _tcp_goal(self, move: Move) -> np.ndarray:

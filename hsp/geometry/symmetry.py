@@ -54,3 +54,17 @@ def canonical_orientations(q: np.ndarray, symmetry: str) -> np.ndarray:
     S = symmetry_rotations(symmetry)
     m = int(np.argmax(np.einsum("ij,mji->m", R[0], S)))  # trace(R_0 · S_m)
     return (Rotation.from_matrix(R) * Rotation.from_matrix(S[m])).as_quat()
+
+
+def nearest_equivalent(q: np.ndarray, symmetry: str, reference: np.ndarray) -> np.ndarray:
+    """Orientations ``q (N, 4)`` each replaced by its symmetric equivalent nearest
+    ``reference (N, 4)`` (for ``z_continuous``: the heading removed, as it cannot be seen).
+    Fed its own last output as the reference, it follows an object through a tracker's
+    switch between look-alike frames (a covered cube re-found resting on another face)."""
+    if symmetry == "none" or len(q) == 0:
+        return q
+    if symmetry == "z_continuous":
+        return canonical_orientations(q, symmetry)
+    R, S = Rotation.from_quat(q).as_matrix(), symmetry_rotations(symmetry)
+    m = np.argmax(np.einsum("nji,njk,mki->nm", Rotation.from_quat(reference).as_matrix(), R, S), axis=1)
+    return (Rotation.from_matrix(R) * Rotation.from_matrix(S[m])).as_quat()
