@@ -40,9 +40,7 @@ class Oracle:
 
     def reset(self, poses: np.ndarray, seed: int) -> None:
         self.rng = np.random.default_rng(seed)
-        self.poses = np.asarray(poses, np.float64).copy()
-        self.poses[:, 3:] = [0.0, 0.0, 0.0, 1.0]
-        self.poses = self._canonical(poses)
+        self.poses = self._canonical(poses, np.tile([0.0, 0.0, 0.0, 1.0], (len(poses), 1)))  # the world axes
         self.plan = PLANS[self.task.spec.kind](PlanContext(self.task, self.rng, lambda: self.poses, self.reach_error))
         self.path: deque[np.ndarray] = deque()
         self.command = poses[0].copy()
@@ -51,7 +49,7 @@ class Oracle:
         self.waited = 0
 
     def act(self, poses: np.ndarray) -> np.ndarray:
-        self.poses = self._canonical(poses)
+        self.poses = self._canonical(poses, self.poses[:, 3:])
         while not self.path and not self._waiting():
             step = next(self.plan, None)
             if step is None:
@@ -66,15 +64,15 @@ class Oracle:
             self.command = self.path.popleft()
         return np.concatenate([self.command, [self.grip]])
 
-    def _canonical(self, poses: np.ndarray) -> np.ndarray:
+    def _canonical(self, poses: np.ndarray, last: np.ndarray) -> np.ndarray:
         """World poses ``(n, 7)`` with every object but the end-effector in the look-alike
-        frame nearest the one it had a step before: the plans take a resting block's z axis
-        to be up, and a tracker may give a cube in any of its 24 look-alike frames, or switch
-        between them when it re-finds a covered block (a base seen lying on its side put the
-        next block's place 8 cm beside the tower)."""
+        frame nearest its ``last (n, 4)`` orientation (the one it had a step before): the
+        plans take a resting block's z axis to be up, and a tracker may give a cube in any
+        of its 24 look-alike frames, or switch between them when it re-finds a covered block
+        (a base seen lying on its side put the next block's place 8 cm beside the tower)."""
         out = np.asarray(poses, np.float64).copy()
         for i, o in enumerate(self.task.objects[1:], start=1):
-            out[i, 3:] = nearest_equivalent(out[i:i + 1, 3:], o.symmetry, self.poses[i:i + 1, 3:])[0]
+            out[i, 3:] = nearest_equivalent(out[i:i + 1, 3:], o.symmetry, last[i:i + 1])[0]
         return out
 
     def _tcp_goal(self, move: Move) -> np.ndarray:

@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hsp.geometry.symmetry import canonical_orientations, symmetry_rotations
+from hsp.geometry.symmetry import canonical_orientations, nearest_equivalent, symmetry_rotations
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -38,3 +38,17 @@ def test_a_cubes_canonical_frame_is_chosen_once_so_it_never_jumps():
 def test_an_object_without_symmetry_keeps_its_orientation():
     q = Rotation.from_rotvec([[0.3, -0.2, 1.0]]).as_quat()
     assert np.array_equal(canonical_orientations(q, "none"), q)
+
+
+def test_the_nearest_look_alike_undoes_a_switch_and_keeps_a_real_turn():
+    """A cube given lying on its side (a look-alike frame) comes back to the frame nearest
+    the reference; a real 30° turn from the reference is kept."""
+    ref = Rotation.from_euler("z", 20, degrees=True)
+    turned = ref * Rotation.from_euler("z", 30, degrees=True)
+    switched = turned * Rotation.from_euler("x", 90, degrees=True)
+    out = Rotation.from_quat(nearest_equivalent(switched.as_quat()[None], "cube", ref.as_quat()[None]))
+    assert (out[0].inv() * turned).magnitude() < 1e-9
+    brush = Rotation.from_euler("y", 80, degrees=True)
+    out = Rotation.from_quat(nearest_equivalent((brush * Rotation.from_euler("x", 180, degrees=True)).as_quat()[None],
+                                                "x_2fold", brush.as_quat()[None]))
+    assert (out[0].inv() * brush).magnitude() < 1e-9
