@@ -4,9 +4,13 @@ executed by the Kuka through the same environment and controller as every learne
 It proves the environment, the controller, grasping and the checkers before any learning
 is blamed. The plan reads the poses the observer gives (the simulator's, or the tracker's
 with ``--observer camera``), each symmetric object in the look-alike frame nearest the one
-it had a step before (nearest the world axes at the first); each way-point becomes a
-minimum-jerk segment of the demonstrator's duration, followed by its pause, then by up to
-``SETTLE_S`` of holding the goal until the tool is there (a robot's lag is not a human's).
+it had a step before (nearest the world axes at the first), and the object it holds where
+its grasp holds it: a grasp is rigid, so the object keeps the pose in the end-effector's
+frame it had when the gripper closed (a camera leaves a round brush handle's roll free; a
+tracked roll drifting past 90° turned the wrist and the brush into the bucket). Each
+way-point becomes a minimum-jerk segment of the demonstrator's duration, followed by its
+pause, then by up to ``SETTLE_S`` of holding the goal until the tool is there (a robot's
+lag is not a human's).
 """
 
 from __future__ import annotations
@@ -45,17 +49,18 @@ class Oracle:
         self.path: deque[np.ndarray] = deque()
         self.command = poses[0].copy()
         self.grip = 0
+        self.grasp = np.zeros(7)  # the held object's pose in the end-effector's frame, from the grasp
         self.move: Move | None = None
         self.waited = 0
 
     def act(self, poses: np.ndarray) -> np.ndarray:
-        self.poses = self._canonical(poses, self.poses[:, 3:])
+        self.poses = self._held(self._canonical(poses, self.poses[:, 3:]))
         while not self.path and not self._waiting():
             step = next(self.plan, None)
             if step is None:
                 break
             if isinstance(step, Grasp):
-                self.grip = step.obj
+                self.grip, self.grasp = step.obj, relative(self.poses[step.obj], self.poses[0])
             elif isinstance(step, Release):
                 self.grip = 0
             else:
@@ -74,6 +79,12 @@ class Oracle:
         for i, o in enumerate(self.task.objects[1:], start=1):
             out[i, 3:] = nearest_equivalent(out[i:i + 1, 3:], o.symmetry, last[i:i + 1])[0]
         return out
+
+    def _held(self, poses: np.ndarray) -> np.ndarray:
+        """``poses (n, 7)`` with the held object where the grasp holds it."""
+        if self.grip:
+            poses[self.grip] = compose(poses[0], self.grasp)
+        return poses
 
     def _tcp_goal(self, move: Move) -> np.ndarray:
         """The tool-centre point's world pose that puts the tool at ``move.pose`` in the target's frame."""

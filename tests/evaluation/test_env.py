@@ -140,3 +140,35 @@ def test_the_oracle_stacks_blocks_whose_frames_switch_to_look_alikes(tasks):
     record = run_episode(env, Oracle(task, 15, env.reach_error), seed=21)
     env.close()
     assert record["success"], record
+
+
+class _RollingHandle:
+    """The simulator's poses with the brush, once lifted, turned about its handle's axis
+    (its x) by 5° more every step, up to 170°: the roll a camera leaves free on a round
+    handle, which a tracker let drift so."""
+
+    def __init__(self, brush: int) -> None:
+        self.brush = brush
+
+    def reset(self, true_poses: np.ndarray, seed: int) -> np.ndarray:
+        self.rest_z, self.lifted = true_poses[self.brush, 2], 0
+        return true_poses
+
+    def observe(self, true_poses: np.ndarray) -> np.ndarray:
+        out = true_poses.copy()
+        if self.lifted or out[self.brush, 2] > self.rest_z + 0.02:
+            self.lifted = min(self.lifted + 5, 170)
+            q = Rotation.from_quat(out[self.brush, 3:]) * Rotation.from_euler("x", self.lifted, degrees=True)
+            out[self.brush, 3:] = q.as_quat()
+        return out
+
+
+def test_the_oracle_holds_what_it_grasped_as_it_grasped_it(tasks):
+    """A grasp is rigid: the plan takes the held brush where the grasp holds it, not where
+    the observer's drifting roll puts it, so the arm does not turn its wrist to follow it."""
+    task = tasks["painting"]
+    brush = next(i for i, o in enumerate(task.objects) if o.symmetry == "x_2fold")
+    env = HspEnv(task, EnvConfig(max_steps=400), observer=_RollingHandle(brush))
+    record = run_episode(env, Oracle(task, 15, env.reach_error), seed=21)
+    env.close()
+    assert record["success"], record
