@@ -4,13 +4,14 @@ executed by the Kuka through the same environment and controller as every learne
 It proves the environment, the controller, grasping and the checkers before any learning
 is blamed. The plan reads the poses the observer gives (the simulator's, or the tracker's
 with ``--observer camera``), each symmetric object in the look-alike frame nearest the one
-it had a step before (nearest the world axes at the first), and the object it holds where
-its grasp holds it: a grasp is rigid, so the object keeps the pose in the end-effector's
-frame it had when the gripper closed (a camera leaves a round brush handle's roll free; a
-tracked roll drifting past 90° turned the wrist and the brush into the bucket). Each
-way-point becomes a minimum-jerk segment of the demonstrator's duration, followed by its
-pause, then by up to ``SETTLE_S`` of holding the goal until the tool is there (a robot's
-lag is not a human's).
+it had a step before (nearest the world axes at the first), and the object it holds turned
+about its symmetry axis as the grasp holds it: a turn about that axis looks (nearly) the
+same to a camera, so the grasp, not the frame, says it (a tracked brush rolling about its
+round handle past 90° turned the wrist and the brush into the bucket); its position and
+the rest of its orientation come from the observer (a grasp slips: a brush 17 mm under
+its load in the simulator). Each way-point becomes a minimum-jerk segment of the
+demonstrator's duration, followed by its pause, then by up to ``SETTLE_S`` of holding the
+goal until the tool is there (a robot's lag is not a human's).
 """
 
 from __future__ import annotations
@@ -19,9 +20,10 @@ from collections import deque
 from collections.abc import Callable
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from hsp.geometry import compose, inverse, relative
-from hsp.geometry.symmetry import nearest_equivalent
+from hsp.geometry.symmetry import nearest_equivalent, symmetry_axis, without_twist
 from hsp.sim.demonstration import PlanContext, segment_duration
 from hsp.sim.demonstrators import PLANS
 from hsp.sim.demonstrators.steps import Grasp, Move, Release
@@ -49,7 +51,7 @@ class Oracle:
         self.path: deque[np.ndarray] = deque()
         self.command = poses[0].copy()
         self.grip = 0
-        self.grasp = np.zeros(7)  # the held object's pose in the end-effector's frame, from the grasp
+        self.grasp = np.zeros(4)  # the held object's orientation in the end-effector's frame at the grasp
         self.move: Move | None = None
         self.waited = 0
 
@@ -60,7 +62,7 @@ class Oracle:
             if step is None:
                 break
             if isinstance(step, Grasp):
-                self.grip, self.grasp = step.obj, relative(self.poses[step.obj], self.poses[0])
+                self.grip, self.grasp = step.obj, relative(self.poses[step.obj], self.poses[0])[3:]
             elif isinstance(step, Release):
                 self.grip = 0
             else:
@@ -81,9 +83,15 @@ class Oracle:
         return out
 
     def _held(self, poses: np.ndarray) -> np.ndarray:
-        """``poses (n, 7)`` with the held object where the grasp holds it."""
-        if self.grip:
-            poses[self.grip] = compose(poses[0], self.grasp)
+        """``poses (n, 7)`` with the held object's turn about its symmetry axis, relative to
+        the grasp, taken out (the swing from the grasp's orientation kept)."""
+        axis = symmetry_axis(self.task.objects[self.grip].symmetry) if self.grip else None
+        if axis is not None:
+            held = relative(poses[self.grip], poses[0])
+            turn = Rotation.from_quat(self.grasp).inv() * Rotation.from_quat(held[3:])
+            swing = without_twist(turn.as_quat()[None], axis)[0]
+            held[3:] = (Rotation.from_quat(self.grasp) * Rotation.from_quat(swing)).as_quat()
+            poses[self.grip] = compose(poses[0], held)
         return poses
 
     def _tcp_goal(self, move: Move) -> np.ndarray:

@@ -10,6 +10,27 @@ CONTINUOUS_STEPS = 360
 """Sampling of a continuous symmetry about z where a finite set is needed."""
 
 
+def symmetry_axis(symmetry: str) -> np.ndarray | None:
+    """The body axis ``(3,)`` a turn about which leaves the object (nearly) unchanged: x for
+    a half turn about x (a round handle), z for a symmetry about z; None for none and for a
+    cube (three such axes, each a quarter turn: a look-alike, not a drift)."""
+    if symmetry == "x_2fold":
+        return np.array([1.0, 0.0, 0.0])
+    if symmetry == "z_continuous" or symmetry in Z_FOLDS and symmetry != "none":
+        return np.array([0.0, 0.0, 1.0])
+    return None
+
+
+def without_twist(q: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Rotations ``q (N, 4)`` with their turn about the body ``axis (3,)`` taken out: the
+    swing s of the swing-twist decomposition q = s · t, t a turn about ``axis``."""
+    q = np.asarray(q, np.float64)
+    t = np.concatenate([(q[:, :3] @ axis)[:, None] * axis, q[:, 3:]], axis=1)
+    norm = np.linalg.norm(t, axis=1, keepdims=True)
+    t = np.where(norm > 1e-12, t / np.maximum(norm, 1e-12), [0.0, 0.0, 0.0, 1.0])  # a half turn about a normal: no twist
+    return (Rotation.from_quat(q) * Rotation.from_quat(t).inv()).as_quat()
+
+
 def z_rotations(k: int) -> np.ndarray:
     """The ``k`` rotations about z by multiples of 2π/k, ``(k, 3, 3)``."""
     return Rotation.from_euler("z", (np.arange(k) * 2 * np.pi / k)[:, None]).as_matrix()

@@ -172,3 +172,13 @@ def test_the_oracle_holds_what_it_grasped_as_it_grasped_it(tasks):
     record = run_episode(env, Oracle(task, 15, env.reach_error), seed=21)
     env.close()
     assert record["success"], record
+
+
+def test_the_oracle_follows_a_brush_that_slips_in_its_grasp(tasks):
+    """In this layout the brush slips 17 mm in the gripper under its load as it is lifted:
+    the plan takes its position from the observer, not from the grasp, and strokes."""
+    task = tasks["painting"]
+    env = HspEnv(task, EnvConfig(max_steps=400))
+    record = run_episode(env, Oracle(task, 15, env.reach_error), seed=1735236722)
+    env.close()
+    assert record["success"], record

@@ -3,7 +3,8 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from hsp.geometry.symmetry import canonical_orientations, nearest_equivalent, symmetry_rotations
+from hsp.geometry.symmetry import (canonical_orientations, nearest_equivalent, symmetry_axis, symmetry_rotations,
+                                   without_twist)
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -52,3 +53,13 @@ def test_the_nearest_look_alike_undoes_a_switch_and_keeps_a_real_turn():
     out = Rotation.from_quat(nearest_equivalent((brush * Rotation.from_euler("x", 180, degrees=True)).as_quat()[None],
                                                 "x_2fold", brush.as_quat()[None]))
     assert (out[0].inv() * brush).magnitude() < 1e-9
+
+
+def test_without_twist_keeps_the_swing_and_drops_the_turn_about_the_axis():
+    swing, twist = Rotation.from_euler("z", 30, degrees=True), Rotation.from_euler("x", 50, degrees=True)
+    q = (swing * twist).as_quat()[None]
+    out = Rotation.from_quat(without_twist(q, symmetry_axis("x_2fold")))
+    assert (out.inv() * swing).magnitude()[0] < 1e-9
+    assert np.allclose(without_twist(twist.as_quat()[None], np.array([1.0, 0, 0])), [[0, 0, 0, 1]], atol=1e-9)
+    assert symmetry_axis("cube") is None and symmetry_axis("none") is None
+    assert np.allclose(symmetry_axis("z_6fold"), [0, 0, 1])
