@@ -5,7 +5,10 @@ points straight up), stays where it came to rest, and, on the table, touches it.
 few noisy points of a small or half-hidden object leaves its tilt and its slide along a
 flat face loosely constrained; at rest neither can change, so the anchor (the running mean
 of ICP's positions and headings since the object stopped) replaces them. An anchored object
-is released as soon as ICP finds it more than ``release_m`` away: it is being moved.
+is released as soon as ICP finds it more than ``release_m`` away while something that moves
+(the end-effector, or an object not at rest) touches it: it is being moved. Nothing moves a
+resting object that nothing touches, so such a jump is ICP's (a base block 25 cm from the
+hand thrown 6 mm and 12° by one frame's noise, and a block then put on it 6 mm off).
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as the depth image does not
@@ -21,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 
@@ -57,6 +61,9 @@ class RestConfig:
     (it leans on something); once anchored, ICP's tilt is noise."""
     table_contact_m: float = 0.01
     """A resting object whose lowest point is this close to the table stands on it."""
+    touch_m: float = 0.03
+    """Surfaces this close count as touching, for a release (the hand's tracked pose is
+    1–2 cm off at worst)."""
     max_seen_through: float = 0.2
     """Largest share of an unseen object's projected surface where depth readings lie
     behind it, for it to count as hidden (held) rather than gone (lost): a socket's wall
@@ -97,7 +104,7 @@ class RestState:
 
     axes: list[np.ndarray | None]
     lowest: list[np.ndarray]
-    """Model surface samples, to find the lowest point of an upright pose."""
+    """Model surface samples, to find the lowest point of an upright pose and what touches it."""
     periods: list[float]
     """Symmetry period (rad) of each object's heading about its up axis; 0 for none at all."""
     cfg: RestConfig = field(default_factory=RestConfig)
@@ -191,7 +198,7 @@ class RestState:
             q_up, tilt = upright(poses[i, 3:], axes)
             if self.mounted[i]:
                 out[i, 3:] = q_up  # released or not, a mounted object only turns about its axis
-            if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up):
+            if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up) and self._touched(i, poses):
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
@@ -209,6 +216,19 @@ class RestState:
                 out[i] = self._settled(i)
         self._ee = poses[0].copy()
         return out
+
+    def _touched(self, i: int, poses: np.ndarray) -> bool:
+        """Whether something that moves (the end-effector, an object not at rest) at
+        ``poses (n, 7)`` comes within ``touch_m`` of anchored object ``i``'s surface."""
+        here = self._surface(i, self._settled(i))
+        for j in np.flatnonzero(~self.anchored):
+            if j != i and np.isfinite(cKDTree(self._surface(j, poses[j])).query(
+                    here, distance_upper_bound=self.cfg.touch_m)[0]).any():
+                return True
+        return False
+
+    def _surface(self, i: int, pose: np.ndarray) -> np.ndarray:
+        return Rotation.from_quat(pose[3:]).apply(self.lowest[i]) + pose[:3]
 
     def _on_axis(self, i: int, ee: np.ndarray) -> bool:
         """Whether the end-effector's origin sits on anchored object ``i``'s vertical axis

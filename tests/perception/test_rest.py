@@ -49,8 +49,11 @@ def test_a_still_object_is_anchored_settled_on_the_table_and_released_when_moved
     held = rest.apply(np.stack([hand, _pose([0.9, 0.9, 0.9], [0, 0, 0])]), np.array([True, False]))
     assert np.allclose(held[1, :3], out[1, :3]), "unseen, it stays where it rests"
     lifted = _pose([0.5, 0.1, 0.05], [0, 0, 0])
-    moved = rest.apply(np.stack([hand, lifted]), np.array([True, True]))
-    assert not rest.anchored[1] and np.allclose(moved[1], lifted), "3 cm up: it is being moved"
+    kept = rest.apply(np.stack([hand, lifted]), np.array([True, True]))
+    assert rest.anchored[1] and np.allclose(kept[1], out[1]), "3 cm up, 37 cm from the hand: ICP's jump, not a move"
+    gripping = _pose([0.5, 0.1, 0.07], [0, 0, 0])  # the hand's box 1 cm above the cube's top
+    moved = rest.apply(np.stack([gripping, lifted]), np.array([True, True]))
+    assert not rest.anchored[1] and np.allclose(moved[1], lifted), "3 cm up in the hand: it is being moved"
 
 
 def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
@@ -69,8 +72,8 @@ def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
     assert not rest.fresh[1]
     rest.apply(np.stack([hand, nut]), np.array([True, True]))
     assert rest.fresh[1], "seen again after a hidden spell: its heading is to be found again"
-    rest.apply(np.stack([hand, _pose([0.5, 0.1, 0.06], [0, 0, 0])]), np.array([True, True]))
-    assert not rest.anchored[1] and not rest.fresh[1], "released: nothing to settle"
+    rest.apply(np.stack([_pose([0.5, 0.1, 0.08], [0, 0, 0]), _pose([0.5, 0.1, 0.06], [0, 0, 0])]), np.array([True, True]))
+    assert not rest.anchored[1] and not rest.fresh[1], "lifted by the hand: released, nothing to settle"
 
 
 def test_a_settled_heading_is_the_mean_of_the_edges_and_is_looked_for_again():
@@ -98,6 +101,9 @@ def test_a_mounted_object_turns_but_never_tilts_even_when_released():
     hand, nut = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.2])
     rest.start(np.stack([hand, nut]), np.array([True, True]))
     pulled = _pose([0.5, 0.1, 0.04], [np.radians(60), 0, 0.3])  # ICP drags it 2 cm up, tipped over
+    out = rest.apply(np.stack([hand, pulled]), np.array([True, True]))
+    assert rest.anchored[1] and np.allclose(out[1], nut), "nothing touches it: held where it rests"
+    hand = _pose([0.5, 0.1, 0.07], [0, 0, 0])  # the socket on it
     out = rest.apply(np.stack([hand, pulled]), np.array([True, True]))
     assert not rest.anchored[1], "2 cm away: released"
     assert np.allclose(out[1, :3], pulled[:3]) and np.isclose(Rotation.from_quat(out[1, 3:]).apply([0, 0, 1])[2], 1.0)
