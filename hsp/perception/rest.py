@@ -5,10 +5,12 @@ points straight up), stays where it came to rest, and, on the table, touches it.
 few noisy points of a small or half-hidden object leaves its tilt and its slide along a
 flat face loosely constrained; at rest neither can change, so the anchor (the running mean
 of ICP's positions and headings since the object stopped) replaces them. An anchored object
-is released as soon as ICP finds it more than ``release_m`` away while something that moves
-(the end-effector, or an object not at rest) touches it: it is being moved. Nothing moves a
-resting object that nothing touches, so such a jump is ICP's (a base block 25 cm from the
-hand thrown 6 mm and 12° by one frame's noise, and a block then put on it 6 mm off).
+is released when ICP finds it more than ``release_m`` away and either something not
+anchored (the end-effector, an object moving or not yet at rest) touches it, or the depth
+image sees through where it rests (it has gone: pushed by a hand the tracker has lost,
+fallen from a tower). Otherwise the jump is ICP's, and the frame's measurement is ignored:
+one frame's noise threw a base block 6 mm and 12° while the hand was 25 cm away, and the
+block then put on the released, wandering base came to rest 6 mm off.
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as the depth image does not
@@ -21,6 +23,7 @@ turn relative to a nut that never turned.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,9 +68,10 @@ class RestConfig:
     """Surfaces this close count as touching, for a release (the hand's tracked pose is
     1–2 cm off at worst)."""
     max_seen_through: float = 0.2
-    """Largest share of an unseen object's projected surface where depth readings lie
-    behind it, for it to count as hidden (held) rather than gone (lost): a socket's wall
-    hugs a nut within millimetres, so what is in front cannot be told from what is on it."""
+    """Largest share of an anchored object's projected surface where depth readings lie
+    behind it, for it to count as still there (hidden, or measured far by ICP's noise) rather
+    than gone: a socket's wall hugs a nut within millimetres, so what is in front cannot be
+    told from what is on it; at a spurious jump 0.00–0.05 are seen through."""
 
 
 def upright(q: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, float]:
@@ -187,10 +191,13 @@ class RestState:
             a[3:] = (Rotation.from_rotvec([0.0, 0.0, turn / self._turns[i]]) * Rotation.from_quat(a[3:])).as_quat()
         return True
 
-    def apply(self, poses: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    def apply(self, poses: np.ndarray, measured: np.ndarray,
+              seen_through: Callable[[int, np.ndarray], float] | None = None) -> np.ndarray:
         """One frame: the tracked ``poses (n, 7)`` with anchored objects settled;
-        ``measured (n,)`` says which objects ICP saw this frame. Anchors are refined by the
-        mean of the measurements near them and released when one is far."""
+        ``measured (n,)`` says which objects ICP saw this frame; ``seen_through(i, pose)`` is
+        the frame's share of object ``i``'s surface at ``pose`` that the depth sees past (none:
+        never gone). Anchors are refined by the mean of the measurements near them and
+        released when one is far and the object is touched or gone."""
         out = poses.copy()
         for i, axes in enumerate(self.axes):
             if axes is None:
@@ -198,7 +205,9 @@ class RestState:
             q_up, tilt = upright(poses[i, 3:], axes)
             if self.mounted[i]:
                 out[i, 3:] = q_up  # released or not, a mounted object only turns about its axis
-            if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up) and self._touched(i, poses):
+            if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up) and (
+                    self._touched(i, poses) or (seen_through is not None and seen_through(
+                        i, self._settled(i)) > self.cfg.max_seen_through)):
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
@@ -218,7 +227,7 @@ class RestState:
         return out
 
     def _touched(self, i: int, poses: np.ndarray) -> bool:
-        """Whether something that moves (the end-effector, an object not at rest) at
+        """Whether something not anchored (the end-effector, an object moving or not yet at rest) at
         ``poses (n, 7)`` comes within ``touch_m`` of anchored object ``i``'s surface."""
         here = self._surface(i, self._settled(i))
         for j in np.flatnonzero(~self.anchored):

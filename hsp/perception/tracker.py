@@ -626,7 +626,8 @@ class FrameTracker:
         pose_t[~self.known], status_t[~self.known] = self.prev[~self.known], TrackStatus.LOST
         if self.rest is not None:
             seen = measured & (status_t != TrackStatus.LOST)
-            pose_t = self.rest.apply(pose_t, seen)
+            through = lambda i, p: _seen_past(self.models[i], p, depth, self.K, self.T_world_cam)  # noqa: E731
+            pose_t = self.rest.apply(pose_t, seen, through)
             look = np.flatnonzero(self.rest.fresh & self.rest.anchored & seen & (np.asarray(self.rest.periods) > 0))  # a heading to find
             gradient = image_gradient(rgb) if look.size else None
             for i in look:

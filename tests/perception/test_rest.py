@@ -56,6 +56,29 @@ def test_a_still_object_is_anchored_settled_on_the_table_and_released_when_moved
     assert not rest.anchored[1] and np.allclose(moved[1], lifted), "3 cm up in the hand: it is being moved"
 
 
+def test_a_far_measurement_releases_only_what_is_touched_or_gone():
+    """ICP finding a resting cube 8 mm off is its own noise unless something not anchored
+    touches the cube or the frame sees through where the cube rests."""
+    hand, cube, block = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0]), _pose([0.55, 0.1, 0.02], [0, 0, 0])
+    jumped, seen = _pose([0.508, 0.1, 0.02], [0, 0, 0]), np.ones(3, bool)
+
+    def state(block_rests: bool) -> RestState:
+        rest = RestState([None, CUBE_AXES, CUBE_AXES], [BOX] * 3, [0.0, np.pi / 2, np.pi / 2])
+        rest.start(np.stack([hand, cube, block]), np.array([True, True, block_rests]))
+        return rest
+
+    rest = state(True)
+    hover = _pose([0.5, 0.1, 0.095], [0, 0, 0])  # the hand's box 3.5 cm above the cube's top
+    for h in (hand, hover):
+        out = rest.apply(np.stack([h, jumped, block]), seen, lambda i, p: 0.0)
+        assert rest.anchored[1] and np.allclose(out[1], cube), "an anchored block 1 cm away, the hand 3.5 cm: ICP's jump"
+    rest.apply(np.stack([hand, jumped, block]), seen, lambda i, p: 0.6)
+    assert not rest.anchored[1], "the frame sees through where it rested: gone (pushed by a hand the tracker lost)"
+    rest = state(False)
+    rest.apply(np.stack([hand, jumped, block]), seen, lambda i, p: 0.0)
+    assert not rest.anchored[1], "a block not at rest 1 cm away (being put down) moved it"
+
+
 def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
     cfg = RestConfig(rest_frames=3)
     rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg)
