@@ -18,7 +18,9 @@ see through where it would be (:func:`~hsp.perception.evidence.seen_through`). A
 hidden under the end-effector, whose origin sits on its axis, turns with it: a socket
 turning on a nut turns the nut. Held still instead, a hex nut turned by 57° under the socket
 reads as unturned (its heading is seen modulo 60° once the socket lifts), and labels put the
-turn relative to a nut that never turned.
+turn relative to a nut that never turned. Its heading is looked for afresh once it is seen
+again; any other object keeps the average it had (a base block half hidden while a block
+was put beside it restarted on one look 4.4° off, and the next block landed 5.8 mm off).
 """
 
 from __future__ import annotations
@@ -124,15 +126,15 @@ class RestState:
         self.anchor = np.zeros((n, 7))
         self.still_at = np.zeros((n, 3))
         self._count = np.zeros(n, int)  # measurements in the position average
-        self._turns = np.zeros(n, int)  # and in the heading average, restarted after a hidden spell
+        self._turns = np.zeros(n, int)  # and in the heading average, restarted after a mounted object's hidden spell
         self.edged = np.zeros(n, int)
         """Edge headings averaged in each anchor's heading (then ICP's no longer count), 0 at its start."""
         self._seen = np.zeros(n, int)  # frames seen since anchored
         self._ee: np.ndarray | None = None  # the end-effector's pose at the last frame
         self._top = np.array([float(np.max(x[:, 2])) if len(x) else 0.0 for x in self.lowest])
         self.fresh = np.zeros(n, bool)
-        """Anchors whose heading has just started (anchored, turned, seen again after a
-        hidden spell) and that have not been :meth:`settle`-d on a better estimate since."""
+        """Anchors whose heading has just started (anchored, turned, a mounted one seen again
+        after a hidden spell) and that have not been :meth:`settle`-d on a better estimate since."""
 
     def start(self, poses: np.ndarray, found: np.ndarray) -> None:
         """Anchor the objects found at the start that can rest (the layout rests them)."""
@@ -211,9 +213,9 @@ class RestState:
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
-                if not measured[i]:  # hidden (a nut under the socket may be turned): heading to find again
-                    self._turns[i], self.edged[i] = 0, 0
-                    if self.mounted[i] and self._on_axis(i, poses[0]):
+                if not measured[i] and self.mounted[i]:  # hidden, maybe turned in place (a nut under the socket)
+                    self._turns[i], self.edged[i] = 0, 0  # heading to find again
+                    if self._on_axis(i, poses[0]):
                         self._turn_with_end_effector(i, poses[0])
                 out[i] = self._settled(i)
                 continue

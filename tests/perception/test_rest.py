@@ -81,7 +81,7 @@ def test_a_far_measurement_releases_only_what_is_touched_or_gone():
 
 def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
     cfg = RestConfig(rest_frames=3)
-    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg)
+    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg, mounted=[False, True])
     hand, nut = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.1])
     rest.start(np.stack([hand, nut]), np.array([True, True]))
     assert rest.fresh.tolist() == [False, True], "anchored at the start: its heading is ICP's"
@@ -95,6 +95,12 @@ def test_a_fresh_heading_is_flagged_until_settled_on_a_better_estimate():
     assert not rest.fresh[1]
     rest.apply(np.stack([hand, nut]), np.array([True, True]))
     assert rest.fresh[1], "seen again after a hidden spell: its heading is to be found again"
+    block = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 2], cfg)  # not mounted: cannot turn in place unseen
+    block.start(np.stack([hand, nut]), np.array([True, True]))
+    block.settle(1, better)
+    block.apply(np.stack([hand, nut]), np.array([True, False]))
+    block.apply(np.stack([hand, nut]), np.array([True, True]))
+    assert not block.fresh[1] and block.edged[1] == 1, "an unmounted block seen again keeps its heading's average"
     rest.apply(np.stack([_pose([0.5, 0.1, 0.08], [0, 0, 0]), _pose([0.5, 0.1, 0.06], [0, 0, 0])]), np.array([True, True]))
     assert not rest.anchored[1] and not rest.fresh[1], "lifted by the hand: released, nothing to settle"
 
