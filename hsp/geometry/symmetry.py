@@ -16,7 +16,7 @@ def symmetry_axis(symmetry: str) -> np.ndarray | None:
     cube (three such axes, each a quarter turn: a look-alike, not a drift)."""
     if symmetry == "x_2fold":
         return np.array([1.0, 0.0, 0.0])
-    if symmetry == "z_continuous" or symmetry in Z_FOLDS and symmetry != "none":
+    if symmetry == "z_continuous" or (symmetry in Z_FOLDS and symmetry != "none"):
         return np.array([0.0, 0.0, 1.0])
     return None
 

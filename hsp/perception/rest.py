@@ -32,6 +32,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from hsp.geometry import transform_points
+
 
 CUBE_AXES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
 UPRIGHT = np.array([[0.0, 0.0, 1.0]])
@@ -207,9 +209,8 @@ class RestState:
             q_up, tilt = upright(poses[i, 3:], axes)
             if self.mounted[i]:
                 out[i, 3:] = q_up  # released or not, a mounted object only turns about its axis
-            if self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up) and (
-                    self._touched(i, poses) or (seen_through is not None and seen_through(
-                        i, self._settled(i)) > self.cfg.max_seen_through)):
+            far = self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up)  # else refined by it
+            if far and self._moved(i, poses, seen_through):
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
@@ -228,18 +229,17 @@ class RestState:
         self._ee = poses[0].copy()
         return out
 
-    def _touched(self, i: int, poses: np.ndarray) -> bool:
-        """Whether something not anchored (the end-effector, an object moving or not yet at rest) at
-        ``poses (n, 7)`` comes within ``touch_m`` of anchored object ``i``'s surface."""
-        here = self._surface(i, self._settled(i))
+    def _moved(self, i: int, poses: np.ndarray, seen_through: Callable[[int, np.ndarray], float] | None) -> bool:
+        """Whether anchored object ``i``, measured far, has really moved: something not
+        anchored (the end-effector, an object moving or not yet at rest) at ``poses (n, 7)``
+        comes within ``touch_m`` of its resting surface, or the frame sees through where it rests."""
+        rests = self._settled(i)
+        here = transform_points(rests, self.lowest[i])
         for j in np.flatnonzero(~self.anchored):
-            if j != i and np.isfinite(cKDTree(self._surface(j, poses[j])).query(
+            if j != i and np.isfinite(cKDTree(transform_points(poses[j], self.lowest[j])).query(
                     here, distance_upper_bound=self.cfg.touch_m)[0]).any():
                 return True
-        return False
-
-    def _surface(self, i: int, pose: np.ndarray) -> np.ndarray:
-        return Rotation.from_quat(pose[3:]).apply(self.lowest[i]) + pose[:3]
+        return seen_through is not None and seen_through(i, rests) > self.cfg.max_seen_through
 
     def _on_axis(self, i: int, ee: np.ndarray) -> bool:
         """Whether the end-effector's origin sits on anchored object ``i``'s vertical axis
