@@ -10,7 +10,10 @@ anchored (the end-effector, an object moving or not yet at rest) touches it, or 
 image sees through where it rests (it has gone: pushed by a hand the tracker has lost,
 fallen from a tower). Otherwise the jump is ICP's, and the frame's measurement is ignored:
 one frame's noise threw a base block 6 mm and 12° while the hand was 25 cm away, and the
-block then put on the released, wandering base came to rest 6 mm off.
+block then put on the released, wandering base came to rest 6 mm off. Likewise a heading
+more than ``turn_deg`` off is a turn only when something touches the object: a wrench's
+socket 3 cm beside a nut and 5 cm above it made ICP's heading jump 23°, and the socket, seated
+in the nut's frame, then turned the nut by 25° of the plan's 48°.
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as the depth image does not
@@ -53,7 +56,8 @@ class RestConfig:
     release_xy_m: float = 0.005
     """... or its horizontal distance (a bucket the brush knocks)."""
     turn_deg: float = 20.0
-    """A heading this far from the anchor's is a turn (a nut turned by the wrench), not noise."""
+    """A heading this far from the anchor's, while something touches the object, is a turn (a
+    nut turned by the wrench), not noise."""
     average_frames: int = 30
     """Anchors average the last this many measurements or so (a running mean, then an EMA)."""
     edge_every: int = 15
@@ -174,9 +178,12 @@ class RestState:
             out[2] -= low
         return out
 
-    def _refine(self, i: int, pose: np.ndarray, q_up: np.ndarray) -> bool:
-        """Average a measurement into the anchor; False when it shows the object moving."""
-        a = self.anchor[i]
+    def _refine(self, i: int, poses: np.ndarray, q_up: np.ndarray) -> bool:
+        """Average object ``i``'s measurement in ``poses (n, 7)`` into its anchor; False when it
+        shows the object moving. A heading more than ``turn_deg`` off is a turn (a new heading)
+        only when something touches the object or its heading is being looked for again (a
+        mounted object after a hidden spell); otherwise it is ICP's, and ignored."""
+        a, pose = self.anchor[i], poses[i]
         if np.linalg.norm(pose[:3] - a[:3]) > self.cfg.release_m or np.linalg.norm(pose[:2] - a[:2]) > self.cfg.release_xy_m:
             return False
         turn = _heading_change(q_up, a[3:], self.periods[i])
@@ -185,8 +192,9 @@ class RestState:
         if abs(pose[2] - a[2]) > self.cfg.refine_m:
             step[2] = 0.0  # pulled up by a block put on top of it
         a[:3] += step
-        if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):  # turned (a nut by the wrench): a new heading
-            a[3:], self._turns[i], self.edged[i], self.fresh[i] = q_up, 1, 0, True
+        if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):
+            if self._turns[i] == 0 or self._touched(i, poses):  # turned (a nut by the wrench): a new heading
+                a[3:], self._turns[i], self.edged[i], self.fresh[i] = q_up, 1, 0, True
             return True
         self._seen[i] += 1
         self.fresh[i] |= (self._turns[i] == 0) | (self._seen[i] % self.cfg.edge_every == 0)  # seen again, or due
@@ -209,8 +217,8 @@ class RestState:
             q_up, tilt = upright(poses[i, 3:], axes)
             if self.mounted[i]:
                 out[i, 3:] = q_up  # released or not, a mounted object only turns about its axis
-            far = self.anchored[i] and measured[i] and not self._refine(i, poses[i], q_up)  # else refined by it
-            if far and self._moved(i, poses, seen_through):
+            far = self.anchored[i] and measured[i] and not self._refine(i, poses, q_up)  # else refined by it
+            if far and (self._touched(i, poses) or self._gone(i, seen_through)):
                 self.anchored[i], self.fresh[i], self.still[i], self.still_at[i] = False, False, 0, poses[i, :3]
                 continue
             if self.anchored[i]:
@@ -229,17 +237,16 @@ class RestState:
         self._ee = poses[0].copy()
         return out
 
-    def _moved(self, i: int, poses: np.ndarray, seen_through: Callable[[int, np.ndarray], float] | None) -> bool:
-        """Whether anchored object ``i``, measured far, has really moved: something not
-        anchored (the end-effector, an object moving or not yet at rest) at ``poses (n, 7)``
-        comes within ``touch_m`` of its resting surface, or the frame sees through where it rests."""
-        rests = self._settled(i)
-        here = transform_points(rests, self.lowest[i])
-        for j in np.flatnonzero(~self.anchored):
-            if j != i and np.isfinite(cKDTree(transform_points(poses[j], self.lowest[j])).query(
-                    here, distance_upper_bound=self.cfg.touch_m)[0]).any():
-                return True
-        return seen_through is not None and seen_through(i, rests) > self.cfg.max_seen_through
+    def _touched(self, i: int, poses: np.ndarray) -> bool:
+        """Whether something not anchored (the end-effector, an object moving or not yet at
+        rest) at ``poses (n, 7)`` comes within ``touch_m`` of anchored object ``i``'s resting surface."""
+        here = transform_points(self._settled(i), self.lowest[i])
+        return any(np.isfinite(cKDTree(transform_points(poses[j], self.lowest[j])).query(
+            here, distance_upper_bound=self.cfg.touch_m)[0]).any() for j in np.flatnonzero(~self.anchored) if j != i)
+
+    def _gone(self, i: int, seen_through: Callable[[int, np.ndarray], float] | None) -> bool:
+        """Whether the frame sees through where anchored object ``i`` rests."""
+        return seen_through is not None and seen_through(i, self._settled(i)) > self.cfg.max_seen_through
 
     def _on_axis(self, i: int, ee: np.ndarray) -> bool:
         """Whether the end-effector's origin sits on anchored object ``i``'s vertical axis

@@ -173,3 +173,16 @@ def test_a_hidden_mounted_object_turns_with_the_end_effector_on_its_axis():
 
     assert np.isclose(turned([0.501, 0.1]), 50.0, atol=1e-6)
     assert np.isclose(turned([0.52, 0.1]), 0.0, atol=1e-6), "2 cm off its axis: the socket is not on it"
+
+
+def test_a_large_turn_is_taken_only_when_something_touches_the_object():
+    """ICP's heading of a resting nut 23° off (a socket 3 cm beside and 5 cm above it hides
+    part of it) is noise; the same heading with the socket on the nut is a turn."""
+    def heading_after(hand: np.ndarray) -> float:
+        rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3), mounted=[False, True])
+        rest.start(np.stack([hand, _pose([0.5, 0.1, 0.02], [0, 0, 0])]), np.array([True, True]))
+        out = rest.apply(np.stack([hand, _pose([0.5, 0.1, 0.02], [0, 0, np.radians(23)])]), np.array([True, True]))
+        return float(np.degrees(Rotation.from_quat(out[1, 3:]).as_rotvec()[2]))
+
+    assert abs(heading_after(_pose([0.53, 0.1, 0.11], [0, 0, 0]))) < 1e-6, "the socket 3 cm beside, 5 cm above the top"
+    assert np.isclose(heading_after(_pose([0.5, 0.1, 0.06], [0, 0, 0])), 23.0), "the socket on the nut turned it"
