@@ -70,7 +70,7 @@ class CameraObserver:
         rgb, depth = self._frame(true_poses)
         self.tracker = first_frame_tracker(self.task, rgb, depth, self.rig.camera.K, self.T_world_cam, self.models, self.cfg)
         poses, self.status = self.tracker.update(rgb, depth)
-        for _ in range(2 ** (LOOK_SEARCHES - 1) * self.cfg.redetect_after):  # the robot waits, still, for the rest
+        for _ in range(2 ** (LOOK_SEARCHES - 1) * self.cfg.redetect_after - 1):  # the robot waits, still, for the rest
             if self.tracker.known.all():
                 break
             poses, self.status = self.tracker.update(*self._frame(true_poses))

@@ -11,9 +11,10 @@ image sees through where it rests (it has gone: pushed by a hand the tracker has
 fallen from a tower). Otherwise the jump is ICP's, and the frame's measurement is ignored:
 one frame's noise threw a base block 6 mm and 12° while the hand was 25 cm away, and the
 block then put on the released, wandering base came to rest 6 mm off. Likewise a heading
-more than ``turn_deg`` off is a turn only when something touches the object: a wrench's
-socket 3 cm beside a nut and 5 cm above it made ICP's heading jump 23°, and the socket, seated
-in the nut's frame, then turned the nut by 25° of the plan's 48°.
+more than ``turn_deg`` off is a turn only when something touches the object (or the object's
+heading is looked for again, or ``edge_every`` frames in a row agree on it): a wrench's socket
+3 cm beside a nut and 5 cm above it made ICP's heading jump 23°, and the socket, seated in the
+nut's frame, then turned the nut by 25° of the plan's 48°.
 
 Anchoring is also what lets the tracker hold an object that another one covers (a nut
 under the socket): it is still where it came to rest, as long as the depth image does not
@@ -56,8 +57,9 @@ class RestConfig:
     release_xy_m: float = 0.005
     """... or its horizontal distance (a bucket the brush knocks)."""
     turn_deg: float = 20.0
-    """A heading this far from the anchor's, while something touches the object, is a turn (a
-    nut turned by the wrench), not noise."""
+    """A heading this far from the anchor's is a turn (a nut turned by the wrench), not noise,
+    when something touches the object, when its heading is looked for again, or when
+    ``edge_every`` frames in a row measure it (:meth:`RestState._refine`)."""
     average_frames: int = 30
     """Anchors average the last this many measurements or so (a running mean, then an EMA)."""
     edge_every: int = 15
@@ -73,8 +75,8 @@ class RestConfig:
     table_contact_m: float = 0.01
     """A resting object whose lowest point is this close to the table stands on it."""
     touch_m: float = 0.03
-    """Surfaces this close count as touching, for a release (the hand's tracked pose is
-    1–2 cm off at worst)."""
+    """Surfaces this close count as touching, for a release or a turn (the hand's tracked
+    pose is 1–2 cm off at worst)."""
     max_seen_through: float = 0.2
     """Largest share of an anchored object's projected surface where depth readings lie
     behind it, for it to count as still there (hidden, or measured far by ICP's noise) rather
@@ -136,6 +138,7 @@ class RestState:
         self.edged = np.zeros(n, int)
         """Edge headings averaged in each anchor's heading (then ICP's no longer count), 0 at its start."""
         self._seen = np.zeros(n, int)  # frames seen since anchored
+        self._off = np.zeros(n, int)  # frames in a row whose heading is more than turn_deg off, untouched
         self._ee: np.ndarray | None = None  # the end-effector's pose at the last frame
         self._top = np.array([float(np.max(x[:, 2])) if len(x) else 0.0 for x in self.lowest])
         self.fresh = np.zeros(n, bool)
@@ -152,7 +155,7 @@ class RestState:
 
     def _anchor(self, i: int, x: np.ndarray, q_up: np.ndarray) -> None:
         self.anchored[i], self._count[i], self._turns[i], self.edged[i], self.fresh[i] = True, 1, 1, 0, True
-        self._seen[i] = 0
+        self._seen[i] = self._off[i] = 0
         self.anchor[i] = np.concatenate([x, q_up])
 
     def settle(self, i: int, pose: np.ndarray) -> np.ndarray:
@@ -181,8 +184,10 @@ class RestState:
     def _refine(self, i: int, poses: np.ndarray, q_up: np.ndarray) -> bool:
         """Average object ``i``'s measurement in ``poses (n, 7)`` into its anchor; False when it
         shows the object moving. A heading more than ``turn_deg`` off is a turn (a new heading)
-        only when something touches the object or its heading is being looked for again (a
-        mounted object after a hidden spell); otherwise it is ICP's, and ignored."""
+        when something touches the object, when its heading is being looked for again (a
+        mounted object after a hidden spell), or when ``edge_every`` frames in a row say so
+        (the anchor's heading was wrong); otherwise that measurement's heading is ICP's noise
+        and ignored (its position still counts)."""
         a, pose = self.anchor[i], poses[i]
         if np.linalg.norm(pose[:3] - a[:3]) > self.cfg.release_m or np.linalg.norm(pose[:2] - a[:2]) > self.cfg.release_xy_m:
             return False
@@ -193,9 +198,11 @@ class RestState:
             step[2] = 0.0  # pulled up by a block put on top of it
         a[:3] += step
         if turn is None or abs(turn) > np.radians(self.cfg.turn_deg):
-            if self._turns[i] == 0 or self._touched(i, poses):  # turned (a nut by the wrench): a new heading
-                a[3:], self._turns[i], self.edged[i], self.fresh[i] = q_up, 1, 0, True
+            self._off[i] += 1
+            if self._turns[i] == 0 or self._off[i] >= self.cfg.edge_every or self._touched(i, poses):
+                a[3:], self._turns[i], self.edged[i], self.fresh[i], self._off[i] = q_up, 1, 0, True, 0  # turned
             return True
+        self._off[i] = 0
         self._seen[i] += 1
         self.fresh[i] |= (self._turns[i] == 0) | (self._seen[i] % self.cfg.edge_every == 0)  # seen again, or due
         self._turns[i] = min(self._turns[i] + 1, self.cfg.average_frames)

@@ -13,6 +13,7 @@ def test_camera_observer_tracks_the_scene_online(tasks):
     task = tasks["stacking-1"]
     env = HspEnv(task, EnvConfig(max_steps=10), observer=CameraObserver(task, CameraRig(CameraConfig(), DepthNoiseConfig())))
     obs, _ = env.reset(seed=5)
+    assert env.observer.tracker.t == 1, "every object found in the first frame: no frame more"
     hold = np.concatenate([obs["agent_pos"], [0.0]])
     for _ in range(4):
         obs, *_ = env.step(hold)
@@ -30,6 +31,7 @@ def test_the_episode_starts_once_every_object_is_found(tasks):
     task = tasks["tire-removal"]
     env = HspEnv(task, EnvConfig(max_steps=10), observer=CameraObserver(task, CameraRig(CameraConfig(), DepthNoiseConfig())))
     obs, _ = env.reset(seed=3645038547)
+    assert env.observer.tracker.t > 1, "this layout's first frame no longer misses a nut: the test needs another"
     seen, true = world_poses(obs)[:, :3], env.poses[-1][:, :3]
     env.close()
     labels = np.array([o.label for o in task.objects])

@@ -186,3 +186,22 @@ def test_a_large_turn_is_taken_only_when_something_touches_the_object():
 
     assert abs(heading_after(_pose([0.53, 0.1, 0.11], [0, 0, 0]))) < 1e-6, "the socket 3 cm beside, 5 cm above the top"
     assert np.isclose(heading_after(_pose([0.5, 0.1, 0.06], [0, 0, 0])), 23.0), "the socket on the nut turned it"
+
+
+def test_an_untouched_heading_is_taken_when_looked_for_again_or_measured_for_long():
+    """Nothing near: a mounted nut seen again after a hidden spell takes the heading it is
+    seen at; a heading that ``edge_every`` frames in a row measure replaces a wrong anchor."""
+    cfg = RestConfig(rest_frames=3, edge_every=5)
+    hand, nut, off = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.4])
+
+    def heading(rest: RestState, out: np.ndarray) -> float:
+        return float(np.degrees(Rotation.from_quat(out[1, 3:]).as_rotvec()[2]))
+
+    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg, mounted=[False, True])
+    rest.start(np.stack([hand, nut]), np.array([True, True]))
+    rest.apply(np.stack([hand, nut]), np.array([True, False]))  # hidden
+    assert np.isclose(heading(rest, rest.apply(np.stack([hand, off]), np.array([True, True]))), np.degrees(0.4))
+    rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg, mounted=[False, True])
+    rest.start(np.stack([hand, nut]), np.array([True, True]))
+    seen = [heading(rest, rest.apply(np.stack([hand, off]), np.array([True, True]))) for _ in range(cfg.edge_every)]
+    assert np.allclose(seen[:-1], 0.0) and np.isclose(seen[-1], np.degrees(0.4)), seen
