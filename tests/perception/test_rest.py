@@ -14,6 +14,11 @@ def _pose(xyz, rotvec):
     return np.concatenate([xyz, Rotation.from_rotvec(rotvec).as_quat()])
 
 
+def _heading_deg(q: np.ndarray) -> float:
+    """Turn (deg) about z of an upright orientation ``q (4,)``."""
+    return float(np.degrees(Rotation.from_quat(q).as_rotvec()[2]))
+
+
 def test_upright_removes_the_tilt_and_keeps_the_heading():
     q = (Rotation.from_euler("z", 30, degrees=True) * Rotation.from_euler("x", 8, degrees=True)).as_quat()
     q_up, tilt = upright(q, UPRIGHT)
@@ -120,7 +125,7 @@ def test_a_settled_heading_is_the_mean_of_the_edges_and_is_looked_for_again():
         if rest.fresh[1]:
             due.append(t)
             rest.settle(1, _pose([0.5, 0.1, 0.02], [0, 0, np.radians(2 if len(due) % 2 == 0 else -2)]))
-    heading = np.degrees(Rotation.from_quat(rest.anchor[1, 3:]).as_rotvec()[2])
+    heading = _heading_deg(rest.anchor[1, 3:])
     assert np.diff(due).tolist() == [cfg.edge_every] * (len(due) - 1) and len(due) == 200 // cfg.edge_every
     assert abs(heading) < 0.3, heading
 
@@ -179,10 +184,11 @@ def test_a_large_turn_is_taken_only_when_something_touches_the_object():
     """ICP's heading of a resting nut 23° off (a socket 3 cm beside and 5 cm above it hides
     part of it) is noise; the same heading with the socket on the nut is a turn."""
     def heading_after(hand: np.ndarray) -> float:
-        rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3), mounted=[False, True])
+        rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], RestConfig(rest_frames=3),
+                         mounted=[False, True])
         rest.start(np.stack([hand, _pose([0.5, 0.1, 0.02], [0, 0, 0])]), np.array([True, True]))
         out = rest.apply(np.stack([hand, _pose([0.5, 0.1, 0.02], [0, 0, np.radians(23)])]), np.array([True, True]))
-        return float(np.degrees(Rotation.from_quat(out[1, 3:]).as_rotvec()[2]))
+        return _heading_deg(out[1, 3:])
 
     assert abs(heading_after(_pose([0.53, 0.1, 0.11], [0, 0, 0]))) < 1e-6, "the socket 3 cm beside, 5 cm above the top"
     assert np.isclose(heading_after(_pose([0.5, 0.1, 0.06], [0, 0, 0])), 23.0), "the socket on the nut turned it"
@@ -192,16 +198,15 @@ def test_an_untouched_heading_is_taken_when_looked_for_again_or_measured_for_lon
     """Nothing near: a mounted nut seen again after a hidden spell takes the heading it is
     seen at; a heading that ``edge_every`` frames in a row measure replaces a wrong anchor."""
     cfg = RestConfig(rest_frames=3, edge_every=5)
-    hand, nut, off = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0.4])
-
-    def heading(rest: RestState, out: np.ndarray) -> float:
-        return float(np.degrees(Rotation.from_quat(out[1, 3:]).as_rotvec()[2]))
+    hand, nut = _pose([0.3, 0.0, 0.3], [0, 0, 0]), _pose([0.5, 0.1, 0.02], [0, 0, 0])
+    off = _pose([0.5, 0.1, 0.02], [0, 0, 0.4])
 
     rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg, mounted=[False, True])
     rest.start(np.stack([hand, nut]), np.array([True, True]))
     rest.apply(np.stack([hand, nut]), np.array([True, False]))  # hidden
-    assert np.isclose(heading(rest, rest.apply(np.stack([hand, off]), np.array([True, True]))), np.degrees(0.4))
+    assert np.isclose(_heading_deg(rest.apply(np.stack([hand, off]), np.array([True, True]))[1, 3:]), np.degrees(0.4))
     rest = RestState([None, UPRIGHT], [BOX, BOX], [0.0, np.pi / 3], cfg, mounted=[False, True])
     rest.start(np.stack([hand, nut]), np.array([True, True]))
-    seen = [heading(rest, rest.apply(np.stack([hand, off]), np.array([True, True]))) for _ in range(cfg.edge_every)]
+    seen = [_heading_deg(rest.apply(np.stack([hand, off]), np.array([True, True]))[1, 3:])
+            for _ in range(cfg.edge_every)]
     assert np.allclose(seen[:-1], 0.0) and np.isclose(seen[-1], np.degrees(0.4)), seen
