@@ -5,14 +5,17 @@
 or a cluster at ``parallel.address``). Pinned pools (Open3D's tracking) run one thread per
 worker on a core of its own. Kept free of heavy imports: a spawned worker runs
 :func:`pin_to_one_core` before it unpickles its first task, and so before Open3D starts
-its thread pool.
+its thread pool. A local worker ends with the process that started it
+(:func:`end_with_parent`), so a stage killed mid-run leaves no worker behind.
 """
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import multiprocessing
 import os
+import signal
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager, nullcontext
@@ -39,6 +42,32 @@ class ScaleOut:
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
             raise HspError(f"parallel.backend = {self.backend!r}: choose one of {', '.join(BACKENDS)}")
+
+
+PR_SET_PDEATHSIG = 1
+"""Linux's ``prctl`` option: the signal a process gets when the thread that started it ends."""
+
+
+def end_with_parent(parent: int) -> None:
+    """Pool initializer: Linux sends this worker SIGTERM when its parent ``parent`` (pid) ends,
+    however it ends (a stage's parent killed with SIGTERM or -9 left its worker tracking
+    for another 57 min). Workers are started by the thread that calls ``map``. Elsewhere
+    than Linux, nothing."""
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return
+    prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != parent:  # the parent ended before the request was made
+        os._exit(1)
+
+
+def _start_worker(parent: int, counter: Any | None) -> None:
+    """Pool initializer of local workers: :func:`end_with_parent`, then, in a pinned pool,
+    :func:`pin_to_one_core`."""
+    end_with_parent(parent)
+    if counter is not None:
+        pin_to_one_core(counter)
 
 
 def pin_to_one_core(counter: Any) -> None:
@@ -79,8 +108,9 @@ def worker_pool(workers: int, scale: ScaleOut = ScaleOut(), pinned: bool = False
         return
     with one_omp_thread() if pinned else nullcontext():
         ctx = multiprocessing.get_context("spawn" if pinned else None)  # a fork would inherit Open3D's threads
-        extra = dict(initializer=pin_to_one_core, initargs=(ctx.Value("i", 0),)) if pinned else {}
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, **extra)
+        counter = ctx.Value("i", 0) if pinned else None
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_start_worker,
+                                   initargs=(os.getpid(), counter))
         try:
             yield pool
         finally:

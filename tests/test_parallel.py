@@ -2,6 +2,11 @@
 
 import json
 import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -42,3 +47,36 @@ def test_eval_on_ray_plays_the_episodes_of_local_processes(tmp_path):
 def test_an_unknown_backend_is_refused():
     with pytest.raises(HspError, match="parallel.backend = 'dask': choose one of processes, ray"):
         ScaleOut("dask")
+
+
+PARENT = """
+import os, sys, time
+from hsp.parallel import worker_pool
+
+def busy(x):
+    print(os.getpid(), flush=True)
+    time.sleep(120)
+
+if __name__ == "__main__":
+    with worker_pool(1, pinned=sys.argv[1] == "pinned") as pool:
+        list(pool.map(busy, [0]))
+"""
+
+
+@pytest.mark.parametrize("pinned", [False, True])
+def test_a_worker_ends_when_its_stage_is_killed(tmp_path, pinned):
+    """A stage killed mid-episode (SIGKILL: no clean-up of its own) leaves no worker running."""
+    script = tmp_path / "stage.py"
+    script.write_text(PARENT)
+    stage = subprocess.Popen([sys.executable, str(script), "pinned" if pinned else "plain"], stdout=subprocess.PIPE,
+                             text=True, env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])})
+    worker = int(stage.stdout.readline())
+    stage.kill()
+    stage.wait()
+    for _ in range(100):
+        if not Path(f"/proc/{worker}").exists():
+            break
+        time.sleep(0.1)
+    else:
+        os.kill(worker, signal.SIGKILL)
+        pytest.fail(f"worker {worker} still runs after its stage was killed")
