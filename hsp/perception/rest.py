@@ -1,7 +1,8 @@
 """Objects at rest: a physical prior for the tracker.
 
-An object that has stopped moving on its support stands upright (one of its resting axes
-points straight up), stays where it came to rest, and, on the table, touches it. ICP on a
+An object that has stopped moving on its support (the table or another object; still in
+the air, it is held) stands upright (one of its resting axes points straight up), stays
+where it came to rest, and, on the table, touches it. ICP on a
 few noisy points of a small or half-hidden object leaves its tilt and its slide along a
 flat face loosely constrained; at rest neither can change, so the anchor (the running mean
 of ICP's positions and headings since the object stopped) replaces them. An anchored object
@@ -73,7 +74,8 @@ class RestConfig:
     """An object tilted further from every resting axis when it stops is not resting on it
     (it leans on something); once anchored, ICP's tilt is noise."""
     table_contact_m: float = 0.01
-    """A resting object whose lowest point is this close to the table stands on it."""
+    """A resting object whose lowest point is this close to the table, or to another object
+    that can rest, stands on it; an object still farther from both is held (not anchored)."""
     touch_m: float = 0.03
     """Surfaces this close count as touching, for a release or a turn (the hand's tracked
     pose is 1–2 cm off at worst)."""
@@ -238,7 +240,7 @@ class RestState:
             if not measured[i] or np.linalg.norm(poses[i, :3] - self.still_at[i]) > self.cfg.still_m:
                 self.still[i], self.still_at[i] = 0, poses[i, :3]
             self.still[i] += measured[i]
-            if self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg:
+            if self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg and self._supported(i, poses, q_up):
                 self._anchor(i, poses[i, :3], q_up)
                 out[i] = self._settled(i)
         self._ee = poses[0].copy()
@@ -250,6 +252,23 @@ class RestState:
         here = transform_points(self._settled(i), self.lowest[i])
         return any(np.isfinite(cKDTree(transform_points(poses[j], self.lowest[j])).query(
             here, distance_upper_bound=self.cfg.touch_m)[0]).any() for j in np.flatnonzero(~self.anchored) if j != i)
+
+    def _supported(self, i: int, poses: np.ndarray, q_up: np.ndarray) -> bool:
+        """Whether object ``i``, upright at its tracked position in ``poses (n, 7)``, stands on
+        something: its bottom within ``table_contact_m`` of the table or of an object that can
+        rest (not the end-effector); a mounted object always does. Still in the air, it is held,
+        not at rest: a block a robot held 12 cm over the tower for 10 frames was anchored there,
+        stayed behind for 3 frames when lowered, until ICP found it ``release_m`` away, and the
+        policy took the pause for the end of its sub-task."""
+        if self.mounted[i]:
+            return True
+        points = transform_points(np.concatenate([poses[i, :3], q_up]), self.lowest[i])
+        bottom = points[points[:, 2] <= points[:, 2].min() + self.cfg.table_contact_m]
+        if bottom[:, 2].min() < self.cfg.table_contact_m:
+            return True
+        return any(np.isfinite(cKDTree(transform_points(poses[j], self.lowest[j])).query(
+            bottom, distance_upper_bound=self.cfg.table_contact_m)[0]).any()
+            for j, axes in enumerate(self.axes) if j != i and axes is not None)
 
     def _gone(self, i: int, seen_through: Callable[[int, np.ndarray], float] | None) -> bool:
         """Whether the frame sees through where anchored object ``i`` rests."""

@@ -10,6 +10,12 @@ BOX = np.array([[x, y, z] for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in
 """Corners of a 4 cm cube around its centre: enough for the lowest point."""
 
 
+_GRID = np.linspace(-0.02, 0.02, 9)
+FACES = np.unique([p for a in _GRID for b in _GRID for c in (-0.02, 0.02)
+                   for p in ([a, b, c], [a, c, b], [c, a, b])], axis=0)
+"""Samples 5 mm apart on the faces of a 4 cm cube: enough to tell what it stands on."""
+
+
 def _pose(xyz, rotvec):
     return np.concatenate([xyz, Rotation.from_rotvec(rotvec).as_quat()])
 
@@ -210,3 +216,22 @@ def test_an_untouched_heading_is_taken_when_looked_for_again_or_measured_for_lon
     seen = [_heading_deg(rest.apply(np.stack([hand, off]), np.array([True, True]))[1, 3:])
             for _ in range(cfg.edge_every)]
     assert np.allclose(seen[:-1], 0.0) and np.isclose(seen[-1], np.degrees(0.4)), seen
+
+
+def test_an_object_held_still_in_the_air_is_not_anchored_one_standing_on_another_is():
+    """Still for longer than ``rest_frames`` 12 cm over the base block, a block is held, not
+    at rest: lowered, it is where ICP finds it at once. Put on the base, it rests."""
+    rest = RestState([None, CUBE_AXES, CUBE_AXES], [FACES] * 3, [0.0, np.pi / 2, np.pi / 2], RestConfig(rest_frames=3))
+    base, seen = _pose([0.5, 0.1, 0.02], [0, 0, 0]), np.ones(3, bool)
+    rest.start(np.stack([_pose([0.3, 0.0, 0.3], [0, 0, 0]), base, base]), np.array([True, True, False]))
+
+    def frame(z: float) -> np.ndarray:  # the block at height z, the hand's origin 4 cm above it
+        return rest.apply(np.stack([_pose([0.5, 0.1, z + 0.04], [0, 0, 0]), base, _pose([0.5, 0.1, z], [0, 0, 0])]), seen)
+
+    for _ in range(5):
+        frame(0.18)
+    assert not rest.anchored[2], "held still in the air"
+    assert np.isclose(frame(0.17)[2, 2], 0.17), "lowered 1 cm: tracked where ICP finds it"
+    for _ in range(5):
+        out = frame(0.0615)  # on the base, ICP 1.5 mm high
+    assert rest.anchored[2] and np.isclose(out[2, 2], 0.0615), "standing on the base block"
