@@ -16,6 +16,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager, nullcontext
@@ -50,14 +51,12 @@ PR_SET_PDEATHSIG = 1
 
 def end_with_parent(parent: int) -> None:
     """Pool initializer: Linux sends this worker SIGTERM when its parent ``parent`` (pid) ends,
-    however it ends (a stage's parent killed with SIGTERM or -9 left its worker tracking
-    for another 57 min). Workers are started by the thread that calls ``map``. Elsewhere
-    than Linux, nothing."""
-    try:
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
+    however it ends (a stage killed with SIGTERM left its worker tracking for another 57 min).
+    The signal follows the thread that started the worker, so ``map`` is called from one that
+    outlives the pool (hsp's stages call it from their main thread). Elsewhere than Linux, nothing."""
+    if sys.platform != "linux":
         return
-    prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
     if os.getppid() != parent:  # the parent ended before the request was made
         os._exit(1)
 
@@ -107,7 +106,8 @@ def worker_pool(workers: int, scale: ScaleOut = ScaleOut(), pinned: bool = False
             yield pool
         return
     with one_omp_thread() if pinned else nullcontext():
-        ctx = multiprocessing.get_context("spawn" if pinned else None)  # a fork would inherit Open3D's threads
+        # a fork would inherit Open3D's threads; on Linux a fork server would be the workers' parent
+        ctx = multiprocessing.get_context("spawn" if pinned or sys.platform != "linux" else "fork")
         counter = ctx.Value("i", 0) if pinned else None
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_start_worker,
                                    initargs=(os.getpid(), counter))

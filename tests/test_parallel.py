@@ -63,6 +63,15 @@ if __name__ == "__main__":
 """
 
 
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie (ended, not yet reaped)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="a parent's death signal is Linux's")
 @pytest.mark.parametrize("pinned", [False, True])
 def test_a_worker_ends_when_its_stage_is_killed(tmp_path, pinned):
     """A stage killed mid-episode (SIGKILL: no clean-up of its own) leaves no worker running."""
@@ -74,7 +83,7 @@ def test_a_worker_ends_when_its_stage_is_killed(tmp_path, pinned):
     stage.kill()
     stage.wait()
     for _ in range(100):
-        if not Path(f"/proc/{worker}").exists():
+        if not _running(worker):
             break
         time.sleep(0.1)
     else:

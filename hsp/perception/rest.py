@@ -74,8 +74,9 @@ class RestConfig:
     """An object tilted further from every resting axis when it stops is not resting on it
     (it leans on something); once anchored, ICP's tilt is noise."""
     table_contact_m: float = 0.01
-    """A resting object whose lowest point is this close to the table, or to another object
-    that can rest, stands on it; an object still farther from both is held (not anchored)."""
+    """A resting object whose lowest point is this close to the table, or to another object's
+    surface under its centre (horizontally as close), stands on it; still elsewhere, it is held
+    and not anchored."""
     touch_m: float = 0.03
     """Surfaces this close count as touching, for a release or a turn (the hand's tracked
     pose is 1–2 cm off at worst)."""
@@ -240,7 +241,8 @@ class RestState:
             if not measured[i] or np.linalg.norm(poses[i, :3] - self.still_at[i]) > self.cfg.still_m:
                 self.still[i], self.still_at[i] = 0, poses[i, :3]
             self.still[i] += measured[i]
-            if self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg and self._supported(i, poses, q_up):
+            rests = self.still[i] >= self.cfg.rest_frames and tilt <= self.cfg.max_tilt_deg
+            if rests and self._supported(i, poses, q_up):
                 self._anchor(i, poses[i, :3], q_up)
                 out[i] = self._settled(i)
         self._ee = poses[0].copy()
@@ -255,20 +257,22 @@ class RestState:
 
     def _supported(self, i: int, poses: np.ndarray, q_up: np.ndarray) -> bool:
         """Whether object ``i``, upright at its tracked position in ``poses (n, 7)``, stands on
-        something: its bottom within ``table_contact_m`` of the table or of an object that can
-        rest (not the end-effector); a mounted object always does. Still in the air, it is held,
-        not at rest: a block a robot held 12 cm over the tower for 10 frames was anchored there,
-        stayed behind for 3 frames when lowered, until ICP found it ``release_m`` away, and the
-        policy took the pause for the end of its sub-task."""
+        something: its lowest point within ``table_contact_m`` of the table, or of the surface
+        of an object that can rest (not the end-effector) under its centre; a mounted object
+        always does. One still elsewhere (in the air, beside a block) is held, not at rest."""
         if self.mounted[i]:
             return True
         points = transform_points(np.concatenate([poses[i, :3], q_up]), self.lowest[i])
-        bottom = points[points[:, 2] <= points[:, 2].min() + self.cfg.table_contact_m]
-        if bottom[:, 2].min() < self.cfg.table_contact_m:
+        low, centre = points[:, 2].min(), points[:, :2].mean(axis=0)
+        if low < self.cfg.table_contact_m:
             return True
-        return any(np.isfinite(cKDTree(transform_points(poses[j], self.lowest[j])).query(
-            bottom, distance_upper_bound=self.cfg.table_contact_m)[0]).any()
-            for j, axes in enumerate(self.axes) if j != i and axes is not None)
+        others = [transform_points(poses[j], self.lowest[j])
+                  for j, axes in enumerate(self.axes) if j != i and axes is not None]
+        if not others:
+            return False
+        below = np.concatenate(others)
+        return bool(((np.linalg.norm(below[:, :2] - centre, axis=1) < self.cfg.table_contact_m)
+                     & (np.abs(below[:, 2] - low) < self.cfg.table_contact_m)).any())
 
     def _gone(self, i: int, seen_through: Callable[[int, np.ndarray], float] | None) -> bool:
         """Whether the frame sees through where anchored object ``i`` rests."""

@@ -219,19 +219,23 @@ def test_an_untouched_heading_is_taken_when_looked_for_again_or_measured_for_lon
 
 
 def test_an_object_held_still_in_the_air_is_not_anchored_one_standing_on_another_is():
-    """Still for longer than ``rest_frames`` 12 cm over the base block, a block is held, not
-    at rest: lowered, it is where ICP finds it at once. Put on the base, it rests."""
+    """Still for longer than ``rest_frames`` beside the base block or 12 cm over it, a block is
+    held, not at rest: lowered, it is where ICP finds it at once. Put on the base, it rests."""
     rest = RestState([None, CUBE_AXES, CUBE_AXES], [FACES] * 3, [0.0, np.pi / 2, np.pi / 2], RestConfig(rest_frames=3))
     base, seen = _pose([0.5, 0.1, 0.02], [0, 0, 0]), np.ones(3, bool)
     rest.start(np.stack([_pose([0.3, 0.0, 0.3], [0, 0, 0]), base, base]), np.array([True, True, False]))
 
-    def frame(z: float) -> np.ndarray:  # the block at height z, the hand's origin 4 cm above it
-        return rest.apply(np.stack([_pose([0.5, 0.1, z + 0.04], [0, 0, 0]), base, _pose([0.5, 0.1, z], [0, 0, 0])]), seen)
+    def frame(x: float, z: float) -> np.ndarray:  # the block at (x, 0.1, z), the hand's origin 4 cm above it
+        hand, block = _pose([x, 0.1, z + 0.04], [0, 0, 0]), _pose([x, 0.1, z], [0, 0, 0])
+        return rest.apply(np.stack([hand, base, block]), seen)
 
     for _ in range(5):
-        frame(0.18)
-    assert not rest.anchored[2], "held still in the air"
-    assert np.isclose(frame(0.17)[2, 2], 0.17), "lowered 1 cm: tracked where ICP finds it"
+        frame(0.545, 0.05)
+    assert not rest.anchored[2], "held still 5 mm beside the base, 3 cm up"
     for _ in range(5):
-        out = frame(0.0615)  # on the base, ICP 1.5 mm high
+        frame(0.5, 0.18)
+    assert not rest.anchored[2], "held still in the air"
+    assert np.isclose(frame(0.5, 0.17)[2, 2], 0.17), "lowered 1 cm: tracked where ICP finds it"
+    for _ in range(5):
+        out = frame(0.5, 0.0615)  # on the base, ICP 1.5 mm high
     assert rest.anchored[2] and np.isclose(out[2, 2], 0.0615), "standing on the base block"
